@@ -1,0 +1,54 @@
+// Indexed triangle meshes, with optional per-vertex attributes, and the mesh-with-quadrics that the
+// cluster stage hands to the decimator.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "ocsimp/core/quadric.h"
+#include "ocsimp/core/types.h"
+
+namespace ocsimp {
+
+// Attribute arrays are either empty or hold exactly one entry per position.
+struct IndexedMesh {
+  std::vector<Vec3f> positions;
+  std::vector<Triangle> triangles;
+  std::vector<Vec3f> normals;
+  std::vector<Color> colors;
+  std::vector<Vec2f> uvs;
+
+  std::size_t vertex_count() const { return positions.size(); }
+  std::size_t face_count() const { return triangles.size(); }
+  bool has_normals() const { return !normals.empty(); }
+  bool has_colors() const { return !colors.empty(); }
+  bool has_uvs() const { return !uvs.empty(); }
+  Box3 bounds() const;
+};
+
+// A mesh whose vertices carry quadrics. `quadrics` is empty (the decimator then builds area-weighted plane
+// quadrics from the faces) or holds one quadric per vertex, summed over the *original* surface, so that costs
+// computed from it measure distance to the original and not to an intermediate (Garland & Shaffer 2002).
+struct QuadricMesh {
+  IndexedMesh mesh;
+  std::vector<Quadric> quadrics;
+};
+
+// Area-weighted plane quadrics of the faces, summed at their corners.
+std::vector<Quadric> face_quadrics_per_vertex(const IndexedMesh& mesh);
+
+// Connectivity facts for `ocsimp info` and for tests that assert manifoldness.
+struct MeshTopology {
+  std::size_t edges = 0;
+  std::size_t boundary_edges = 0;      // used by exactly one face
+  std::size_t non_manifold_edges = 0;  // used by three or more faces
+  std::size_t inconsistent_edges = 0;  // two faces traverse the edge in the same direction (orientation flip)
+  std::size_t components = 0;          // connected by shared vertices, counting only vertices that faces use
+  std::size_t degenerate_faces = 0;    // a repeated corner index
+  std::size_t duplicate_faces = 0;     // same corner set as an earlier face
+  std::size_t unreferenced_vertices = 0;
+  std::size_t non_manifold_vertices = 0;  // faces around the vertex form more than one fan
+};
+MeshTopology analyze_topology(const IndexedMesh& mesh);
+
+}  // namespace ocsimp

@@ -1,0 +1,29 @@
+// Process facts every stage needs: memory (for budgets and reports), progress reporting, cancellation.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <string_view>
+
+namespace ocsimp {
+
+std::uint64_t physical_memory_bytes();
+// Peak and current resident set size of this process (from /proc/self/status); 0 where unknown.
+std::uint64_t peak_rss_bytes();
+std::uint64_t current_rss_bytes();
+
+// "2G", "512M", "1.5GiB", "100000" (bytes) -> bytes. Throws Error on anything else.
+std::uint64_t parse_byte_size(std::string_view text);
+std::string format_bytes(std::uint64_t bytes);
+
+// Stages report `done` out of `total` units of work in `phase` (total 0 = unknown). Called from the thread
+// that drives the stage, at most every few thousand units, so a callback may draw without locking.
+using ProgressFn = std::function<void(std::string_view phase, std::uint64_t done, std::uint64_t total)>;
+
+inline void report(const ProgressFn& progress, std::string_view phase, std::uint64_t done,
+                   std::uint64_t total) {
+  if (progress) progress(phase, done, total);
+}
+
+}  // namespace ocsimp

@@ -1,0 +1,45 @@
+// Small geometric value types shared by every module.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <cstdint>
+#include <limits>
+
+namespace ocsimp {
+
+using Vec2f = Eigen::Vector2f;
+using Vec3f = Eigen::Vector3f;
+using Vec3d = Eigen::Vector3d;
+
+// Vertex indices are 32-bit: a billion-triangle scan has about half a billion vertices.
+using Index = std::uint32_t;
+using Triangle = std::array<Index, 3>;
+// RGBA, 8 bits a channel: what PLY, Draco and most scanners store.
+using Color = std::array<std::uint8_t, 4>;
+
+// Axis-aligned bounding box; empty (lo > hi) until the first point is added.
+struct Box3 {
+  Vec3d lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+           std::numeric_limits<double>::infinity()};
+  Vec3d hi{-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+           -std::numeric_limits<double>::infinity()};
+
+  bool empty() const { return !(lo.x() <= hi.x() && lo.y() <= hi.y() && lo.z() <= hi.z()); }
+  void add(const Vec3d& p) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  void add(const Vec3f& p) { add(Vec3d(p.cast<double>())); }
+  void add(const Box3& b) {
+    if (b.empty()) return;
+    add(b.lo);
+    add(b.hi);
+  }
+  Vec3d extent() const { return empty() ? Vec3d::Zero() : Vec3d(hi - lo); }
+  Vec3d center() const { return empty() ? Vec3d::Zero() : Vec3d(0.5 * (lo + hi)); }
+  double diagonal() const { return extent().norm(); }
+};
+
+}  // namespace ocsimp

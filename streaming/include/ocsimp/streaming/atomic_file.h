@@ -1,0 +1,46 @@
+// Output files that appear complete or not at all.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace ocsimp {
+
+// Buffered writer to a hidden temporary file in the target's folder. commit() flushes, closes and renames it
+// over the target; destruction without commit() (an exception, an early return) deletes the temporary. A
+// SIGINT/SIGTERM/SIGHUP handler deletes every live temporary before the process dies.
+class AtomicFile {
+ public:
+  explicit AtomicFile(std::string path);
+  ~AtomicFile();
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+
+  void write(const void* data, std::size_t size);
+  void write(std::string_view text) { write(text.data(), text.size()); }
+  // Space for `size` bytes in the buffer, to be filled by the caller and then accounted by advance(size).
+  // Lets hot writers format straight into the buffer. `size` must not exceed buffer_capacity.
+  char* reserve(std::size_t size);
+  void advance(std::size_t size) { used_ += size; }
+  std::uint64_t bytes_written() const { return flushed_ + used_; }
+  void commit();
+
+  const std::string& path() const { return path_; }
+  static constexpr std::size_t buffer_capacity = 1 << 20;
+
+ private:
+  void flush();
+
+  std::string path_;
+  std::string temp_path_;
+  int fd_ = -1;
+  std::vector<char> buffer_;
+  std::size_t used_ = 0;
+  std::uint64_t flushed_ = 0;
+  bool committed_ = false;
+};
+
+}  // namespace ocsimp

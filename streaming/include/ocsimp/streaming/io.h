@@ -1,0 +1,48 @@
+// Reading and writing meshes: format detection, streaming reads, whole-mesh reads built on the same
+// parsers, and writers that only ever leave complete files behind.
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "ocsimp/core/mesh.h"
+#include "ocsimp/core/system.h"
+#include "ocsimp/streaming/triangle_stream.h"
+
+namespace ocsimp {
+
+enum class FileFormat { ply, obj, stl, drc };
+
+const char* format_name(FileFormat format);
+// From the file's first bytes (PLY and Draco magic, STL binary size rule, OBJ keywords); falls back on the
+// extension only where the content is ambiguous. Throws Error when the file cannot be opened or recognized.
+FileFormat detect_format(const std::string& path);
+// From the extension alone (for writers): .ply .obj .stl .drc, case-insensitive. Throws Error otherwise.
+FileFormat format_from_extension(const std::string& path);
+
+struct ReadOptions {
+  std::size_t batch_capacity = TriangleBatch::default_capacity;
+  ProgressFn progress;  // bytes of input read ("read" phase)
+};
+
+std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
+                                                     const ReadOptions& options = {});
+
+// The whole mesh in memory, built by draining the stream. Corners of a triangle soup (STL) that share a
+// position exactly are welded into one vertex.
+IndexedMesh read_mesh(const std::string& path, const ReadOptions& options = {});
+
+struct WriteOptions {
+  std::optional<FileFormat> format;  // default: from the output path's extension
+  bool ascii = false;                // PLY and STL: text instead of binary
+  int draco_position_bits = 16;      // Draco position quantization (1..30)
+  int draco_compression_level = 7;   // Draco speed/size trade-off (0 fastest .. 10 smallest)
+  ProgressFn progress;               // faces written ("write" phase)
+};
+
+// Writes atomically: to a temporary name beside `path`, renamed over it only when complete.
+void write_mesh(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options = {});
+
+}  // namespace ocsimp

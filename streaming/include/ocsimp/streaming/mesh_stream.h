@@ -1,0 +1,18 @@
+// A TriangleStream over a mesh already in memory: lets the cluster stage, tests and benchmarks run on
+// generated or loaded meshes through the same interface as files.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "ocsimp/core/mesh.h"
+#include "ocsimp/streaming/triangle_stream.h"
+
+namespace ocsimp {
+
+// `as_soup` streams corner positions instead of indices, as an STL reader would.
+// The mesh is copied when passed by value; move it in to avoid the copy.
+std::unique_ptr<TriangleStream> make_mesh_stream(
+    IndexedMesh mesh, bool as_soup = false, std::size_t batch_capacity = TriangleBatch::default_capacity);
+
+}  // namespace ocsimp

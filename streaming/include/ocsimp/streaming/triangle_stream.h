@@ -1,0 +1,59 @@
+// TriangleStream: the pull interface through which the cluster stage reads a mesh of any size in one pass.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "ocsimp/core/mesh.h"
+#include "ocsimp/core/types.h"
+
+namespace ocsimp {
+
+// One batch of triangles. An indexed stream fills `triangles` with indices into its vertex array; a triangle
+// soup (STL, or faces dereferenced out of core) fills `corners` with positions. Exactly one of the two is
+// used.
+struct TriangleBatch {
+  static constexpr std::size_t default_capacity = 1 << 16;
+
+  std::vector<Triangle> triangles;
+  std::vector<std::array<Vec3f, 3>> corners;
+
+  std::size_t size() const { return triangles.size() + corners.size(); }
+  void clear() {
+    triangles.clear();
+    corners.clear();
+  }
+};
+
+class TriangleStream {
+ public:
+  virtual ~TriangleStream() = default;
+
+  // Clears `batch` and fills it with up to the stream's batch capacity of triangles (polygons arrive
+  // fan-triangulated). Returns false, with an empty batch, once the input is exhausted. Throws Error on bad
+  // input.
+  virtual bool next(TriangleBatch& batch) = 0;
+
+  // Indexed streams: the vertex array, loaded once before the first batch, as a mesh without triangles
+  // (positions plus whichever of normals, colors and uvs the file has). Soups: an empty mesh.
+  virtual const IndexedMesh& vertices() const = 0;
+  bool indexed() const { return !vertices().positions.empty(); }
+
+  // Bounding box of every vertex. Known up front for indexed streams; a soup may scan its input once for it.
+  virtual Box3 bounds() = 0;
+
+  // Triangles promised by the header, or 0 when the format does not say (OBJ). Polygons may make it an
+  // underestimate: for progress only, never for allocation.
+  virtual std::uint64_t triangles_hint() const = 0;
+
+  // Progress in bytes of the input file.
+  virtual std::uint64_t bytes_read() const = 0;
+  virtual std::uint64_t bytes_total() const = 0;
+
+  virtual const std::string& path() const = 0;
+};
+
+}  // namespace ocsimp

@@ -1,0 +1,147 @@
+#include "ocsimp/streaming/atomic_file.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <mutex>
+#include <string_view>
+
+#include "ocsimp/core/error.h"
+
+namespace ocsimp {
+namespace {
+
+// Live temporaries, in fixed storage so the signal handler can unlink them without allocating.
+constexpr int kMaxLive = 64;
+constexpr std::size_t kMaxPath = 4096;
+char g_live[kMaxLive][kMaxPath];
+std::atomic<bool> g_used[kMaxLive];
+std::mutex g_live_mutex;
+std::once_flag g_handlers_installed;
+
+extern "C" void remove_temporaries_and_die(int signal_number) {
+  for (int i = 0; i < kMaxLive; ++i) {
+    if (g_used[i].load()) unlink(g_live[i]);
+  }
+  ::signal(signal_number, SIG_DFL);
+  ::raise(signal_number);
+}
+
+void install_handlers() {
+  for (int s : {SIGINT, SIGTERM, SIGHUP}) {
+    struct sigaction action {};
+    action.sa_handler = remove_temporaries_and_die;
+    sigemptyset(&action.sa_mask);
+    sigaction(s, &action, nullptr);
+  }
+}
+
+int register_live(const std::string& path) {
+  std::call_once(g_handlers_installed, install_handlers);
+  if (path.size() >= kMaxPath) return -1;
+  std::lock_guard lock(g_live_mutex);
+  for (int i = 0; i < kMaxLive; ++i) {
+    if (!g_used[i].load()) {
+      std::memcpy(g_live[i], path.c_str(), path.size() + 1);
+      g_used[i].store(true);
+      return i;
+    }
+  }
+  return -1;
+}
+
+void unregister_live(const std::string& path) {
+  std::lock_guard lock(g_live_mutex);
+  for (int i = 0; i < kMaxLive; ++i) {
+    if (g_used[i].load() && path == g_live[i]) g_used[i].store(false);
+  }
+}
+
+std::string system_reason(std::string_view what) {
+  return std::string(what) + ": " + std::strerror(errno);
+}
+
+}  // namespace
+
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), buffer_(buffer_capacity) {
+  const std::filesystem::path target(path_);
+  const std::filesystem::path folder = target.parent_path().empty() ? "." : target.parent_path();
+  std::string temp_name(".");
+  temp_name.append(target.filename().string()).append(".tmp.XXXXXX");
+  std::string pattern = (folder / temp_name).string();
+  fd_ = mkstemp(pattern.data());
+  if (fd_ < 0) throw Error(path_, {}, system_reason("cannot create a temporary file in " + folder.string()));
+  temp_path_ = pattern;
+  register_live(temp_path_);
+}
+
+AtomicFile::~AtomicFile() {
+  if (!committed_) {
+    if (fd_ >= 0) ::close(fd_);
+    ::unlink(temp_path_.c_str());
+    unregister_live(temp_path_);
+  }
+}
+
+char* AtomicFile::reserve(std::size_t size) {
+  if (used_ + size > buffer_.size()) flush();
+  return buffer_.data() + used_;
+}
+
+void AtomicFile::write(const void* data, std::size_t size) {
+  const char* bytes = static_cast<const char*>(data);
+  if (used_ + size > buffer_.size()) flush();
+  if (size >= buffer_.size()) {
+    // Large blocks bypass the buffer.
+    while (size > 0) {
+      const ssize_t n = ::write(fd_, bytes, size);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw Error(path_, {}, system_reason("write failed"));
+      bytes += n;
+      size -= static_cast<std::size_t>(n);
+      flushed_ += static_cast<std::uint64_t>(n);
+    }
+    return;
+  }
+  std::memcpy(buffer_.data() + used_, bytes, size);
+  used_ += size;
+}
+
+void AtomicFile::flush() {
+  std::size_t done = 0;
+  while (done < used_) {
+    const ssize_t n = ::write(fd_, buffer_.data() + done, used_ - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw Error(path_, {}, system_reason("write failed"));
+    done += static_cast<std::size_t>(n);
+  }
+  flushed_ += used_;
+  used_ = 0;
+}
+
+void AtomicFile::commit() {
+  flush();
+  // New files get the usual permissions (mkstemp makes them 0600).
+  const mode_t mask = ::umask(0);
+  ::umask(mask);
+  ::fchmod(fd_, 0666 & ~mask);
+  if (::close(fd_) != 0) {
+    fd_ = -1;
+    throw Error(path_, {}, system_reason("close failed"));
+  }
+  fd_ = -1;
+  if (std::rename(temp_path_.c_str(), path_.c_str()) != 0) {
+    throw Error(path_, {}, system_reason("cannot rename the finished temporary into place"));
+  }
+  committed_ = true;
+  unregister_live(temp_path_);
+}
+
+}  // namespace ocsimp

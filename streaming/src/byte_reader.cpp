@@ -1,0 +1,64 @@
+#include "byte_reader.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+
+#include "ocsimp/core/error.h"
+
+namespace ocsimp::detail {
+
+ByteReader::ByteReader(std::string path, std::size_t capacity) : path_(std::move(path)), buffer_(capacity) {
+  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) throw Error(path_, {}, std::string("cannot open: ") + std::strerror(errno));
+  struct stat info {};
+  if (::fstat(fd_, &info) != 0 || !S_ISREG(info.st_mode)) {
+    ::close(fd_);
+    throw Error(path_, {}, "not a regular file");
+  }
+  file_size_ = static_cast<std::uint64_t>(info.st_size);
+  ::posix_fadvise(fd_, 0, 0, POSIX_FADV_SEQUENTIAL);
+}
+
+ByteReader::~ByteReader() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+std::size_t ByteReader::fill(std::size_t count) {
+  if (available() >= count || eof_) return available();
+  // Move the unread tail to the front, then read until `count` bytes are there or the file ends.
+  const std::size_t tail = end_ - cursor_;
+  if (cursor_ > 0) {
+    std::memmove(buffer_.data(), buffer_.data() + cursor_, tail);
+    window_offset_ += cursor_;
+    cursor_ = 0;
+    end_ = tail;
+  }
+  while (end_ < count && end_ < buffer_.size()) {
+    const ssize_t n = ::read(fd_, buffer_.data() + end_, buffer_.size() - end_);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0)
+      throw Error(path_, FilePosition::byte(window_offset_ + end_),
+                  std::string("read failed: ") + std::strerror(errno));
+    if (n == 0) {
+      eof_ = true;
+      break;
+    }
+    end_ += static_cast<std::size_t>(n);
+  }
+  return available();
+}
+
+void ByteReader::seek(std::uint64_t offset) {
+  if (::lseek(fd_, static_cast<off_t>(offset), SEEK_SET) < 0) {
+    throw Error(path_, FilePosition::byte(offset), std::string("seek failed: ") + std::strerror(errno));
+  }
+  window_offset_ = offset;
+  cursor_ = end_ = 0;
+  eof_ = false;
+}
+
+}  // namespace ocsimp::detail

@@ -1,0 +1,173 @@
+#include "ocsimp/streaming/io.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <string_view>
+#include <unordered_map>
+
+#include "byte_reader.h"
+#include "formats.h"
+#include "ocsimp/core/error.h"
+
+namespace ocsimp {
+namespace {
+
+std::string lower_extension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return ext;
+}
+
+std::optional<FileFormat> format_of_extension(const std::string& path) {
+  const std::string ext = lower_extension(path);
+  if (ext == ".ply") return FileFormat::ply;
+  if (ext == ".obj") return FileFormat::obj;
+  if (ext == ".stl") return FileFormat::stl;
+  if (ext == ".drc") return FileFormat::drc;
+  return std::nullopt;
+}
+
+bool starts_with(std::string_view text, std::string_view prefix) {
+  return text.size() >= prefix.size() && text.substr(0, prefix.size()) == prefix;
+}
+
+// Position bits -> vertex index, for welding the corners of a soup. Keyed on exact bit patterns (with -0
+// folded onto +0), so welding never moves a point.
+struct PositionKey {
+  std::uint32_t x, y, z;
+  bool operator==(const PositionKey&) const = default;
+};
+struct PositionKeyHash {
+  std::size_t operator()(const PositionKey& k) const {
+    std::uint64_t h = k.x * 0x9E3779B97F4A7C15ull;
+    h ^= (h >> 29) + k.y * 0xBF58476D1CE4E5B9ull;
+    h ^= (h >> 31) + k.z * 0x94D049BB133111EBull;
+    return static_cast<std::size_t>(h ^ (h >> 32));
+  }
+};
+std::uint32_t float_key(float f) {
+  if (f == 0.0f) f = 0.0f;
+  std::uint32_t bits;
+  std::memcpy(&bits, &f, sizeof bits);
+  return bits;
+}
+
+}  // namespace
+
+const char* format_name(FileFormat format) {
+  switch (format) {
+    case FileFormat::ply:
+      return "PLY";
+    case FileFormat::obj:
+      return "OBJ";
+    case FileFormat::stl:
+      return "STL";
+    case FileFormat::drc:
+      return "Draco";
+  }
+  return "unknown";
+}
+
+FileFormat format_from_extension(const std::string& path) {
+  if (auto format = format_of_extension(path)) return *format;
+  throw Error(path, {}, "unknown output format (use a .ply, .obj, .stl or .drc extension)");
+}
+
+FileFormat detect_format(const std::string& path) {
+  detail::ByteReader reader(path, 1 << 16);
+  const std::size_t n = reader.fill(512);
+  const std::string_view head(reader.data(), n);
+  if (n == 0) throw Error(path, FilePosition::byte(0), "empty file");
+  if (starts_with(head, "ply\n") || starts_with(head, "ply\r\n")) return FileFormat::ply;
+  if (starts_with(head, "DRACO")) return FileFormat::drc;
+  // Binary STL: an 80-byte header, a triangle count, then exactly 50 bytes a triangle. Checked before the
+  // text forms because binary headers often begin with "solid" too.
+  if (reader.file_size() >= 84 && n >= 84) {
+    std::uint32_t count;
+    std::memcpy(&count, reader.data() + 80, 4);
+    if (84 + 50 * static_cast<std::uint64_t>(count) == reader.file_size()) return FileFormat::stl;
+  }
+  std::size_t first = 0;
+  while (first < head.size() && std::isspace(static_cast<unsigned char>(head[first]))) ++first;
+  const std::string_view text = head.substr(first);
+  if (starts_with(text, "solid") && !format_of_extension(path).has_value()) return FileFormat::stl;
+  if (starts_with(text, "solid") && format_of_extension(path) == FileFormat::stl) return FileFormat::stl;
+  if (starts_with(head, "ply")) return FileFormat::ply;  // a malformed PLY: let its parser say what is wrong
+  if (auto by_name = format_of_extension(path)) {
+    if (*by_name == FileFormat::obj || *by_name == FileFormat::stl) return *by_name;
+  }
+  // OBJ has no magic: accept text that starts with an OBJ statement or a comment.
+  for (std::string_view keyword :
+       {"v ", "vn ", "vt ", "f ", "#", "o ", "g ", "s ", "mtllib", "usemtl", "v\t"}) {
+    if (starts_with(text, keyword)) return FileFormat::obj;
+  }
+  if (auto by_name = format_of_extension(path)) return *by_name;
+  throw Error(path, FilePosition::byte(0), "unrecognized file format (not PLY, OBJ, STL or Draco)");
+}
+
+std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path, const ReadOptions& options) {
+  switch (detect_format(path)) {
+    case FileFormat::ply:
+      return detail::open_ply_stream(path, options);
+    case FileFormat::obj:
+      return detail::open_obj_stream(path, options);
+    case FileFormat::stl:
+      return detail::open_stl_stream(path, options);
+    case FileFormat::drc:
+      return detail::open_drc_stream(path, options);
+  }
+  throw Error(path, {}, "unsupported format");
+}
+
+IndexedMesh read_mesh(const std::string& path, const ReadOptions& options) {
+  std::unique_ptr<TriangleStream> stream = open_triangle_stream(path, options);
+  IndexedMesh mesh;
+  TriangleBatch batch;
+  if (stream->indexed()) {
+    mesh = stream->vertices();
+    // The header's count is a hint only; grow as the data proves itself.
+    while (stream->next(batch))
+      mesh.triangles.insert(mesh.triangles.end(), batch.triangles.begin(), batch.triangles.end());
+  } else {
+    std::unordered_map<PositionKey, Index, PositionKeyHash> index_of;
+    while (stream->next(batch)) {
+      for (const auto& corners : batch.corners) {
+        Triangle t;
+        for (int k = 0; k < 3; ++k) {
+          const Vec3f& p = corners[k];
+          const PositionKey key{float_key(p.x()), float_key(p.y()), float_key(p.z())};
+          auto [it, inserted] = index_of.try_emplace(key, static_cast<Index>(mesh.positions.size()));
+          if (inserted) {
+            if (mesh.positions.size() >= std::numeric_limits<Index>::max()) {
+              throw Error(path, {}, "more than 2^32-1 distinct vertices");
+            }
+            mesh.positions.push_back(p);
+          }
+          t[k] = it->second;
+        }
+        mesh.triangles.push_back(t);
+      }
+    }
+  }
+  if (mesh.triangles.empty()) throw Error(path, {}, "the mesh has no faces");
+  return mesh;
+}
+
+void write_mesh(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
+  const FileFormat format = options.format ? *options.format : format_from_extension(path);
+  switch (format) {
+    case FileFormat::ply:
+      return detail::write_ply(path, mesh, options);
+    case FileFormat::obj:
+      return detail::write_obj(path, mesh, options);
+    case FileFormat::stl:
+      return detail::write_stl(path, mesh, options);
+    case FileFormat::drc:
+      return detail::write_drc(path, mesh, options);
+  }
+}
+
+}  // namespace ocsimp

@@ -1,0 +1,33 @@
+#include "ocsimp/core/system.h"
+
+#include <gtest/gtest.h>
+
+#include "ocsimp/core/error.h"
+
+namespace ocsimp {
+namespace {
+
+TEST(System, ParsesByteSizes) {
+  EXPECT_EQ(parse_byte_size("2G"), 2ull << 30);
+  EXPECT_EQ(parse_byte_size("512m"), 512ull << 20);
+  EXPECT_EQ(parse_byte_size("1.5GiB"), 3ull << 29);
+  EXPECT_EQ(parse_byte_size("100000"), 100000ull);
+  EXPECT_THROW(parse_byte_size("lots"), Error);
+  EXPECT_THROW(parse_byte_size("2X"), Error);
+  EXPECT_THROW(parse_byte_size("-1G"), Error);
+}
+
+TEST(System, ReportsMemory) {
+  EXPECT_GT(physical_memory_bytes(), 0u);
+  EXPECT_GT(peak_rss_bytes(), 0u);
+  EXPECT_GE(peak_rss_bytes(), current_rss_bytes() / 2);
+}
+
+TEST(Error, MessageNamesFilePlaceAndReason) {
+  EXPECT_STREQ(Error("a.ply", FilePosition::byte(12), "bad").what(), "a.ply: byte 12: bad");
+  EXPECT_STREQ(Error("a.obj", FilePosition::line(3), "bad").what(), "a.obj: line 3: bad");
+  EXPECT_STREQ(Error("just this").what(), "just this");
+}
+
+}  // namespace
+}  // namespace ocsimp
