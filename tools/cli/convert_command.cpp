@@ -1,0 +1,35 @@
+// ocsimp convert: any supported format to any other, chosen by the output extension.
+#include "commands.h"
+#include "ocsimp/streaming/io.h"
+
+namespace ocsimp::cli {
+
+void add_convert_command(CLI::App& app) {
+  auto* cmd =
+      app.add_subcommand("convert", "Convert a mesh between PLY, OBJ, STL and Draco (by output extension)");
+  struct Flags {
+    std::string input, output;
+    WriteOptions write;
+    bool quiet = false;
+  };
+  auto flags = std::make_shared<Flags>();
+  cmd->add_option("input", flags->input, "Input mesh (format detected from content)")->required();
+  cmd->add_option("output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
+  cmd->add_flag("--ascii", flags->write.ascii, "Text PLY or STL instead of binary");
+  cmd->add_option("--draco-bits", flags->write.draco_position_bits, "Draco position quantization bits")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 30));
+  cmd->add_option("--draco-level", flags->write.draco_compression_level, "Draco compression level (0..10)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10));
+  cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
+  cmd->callback([flags] {
+    format_from_extension(flags->output);  // refuse an unknown output format before reading anything
+    ReadOptions read;
+    read.progress = make_progress(flags->quiet);
+    flags->write.progress = read.progress;
+    write_mesh(flags->output, read_mesh(flags->input, read), flags->write);
+  });
+}
+
+}  // namespace ocsimp::cli

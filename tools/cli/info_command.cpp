@@ -1,0 +1,66 @@
+// ocsimp info: counts, attributes, extent and connectivity defects of a mesh file.
+#include <cstdio>
+
+#include "commands.h"
+#include "ocsimp/core/mesh.h"
+#include "ocsimp/streaming/io.h"
+
+namespace ocsimp::cli {
+
+void add_info_command(CLI::App& app) {
+  auto* cmd =
+      app.add_subcommand("info", "Print counts, attributes, bounding box and connectivity facts of a mesh");
+  auto input = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  cmd->add_option("input", *input, "Mesh file (PLY, OBJ, STL or Draco; detected from content)")->required();
+  cmd->add_flag("--json", *json, "Print one JSON object instead of text");
+  cmd->callback([input, json] {
+    const FileFormat format = detect_format(*input);
+    const IndexedMesh mesh = read_mesh(*input);
+    const MeshTopology topo = analyze_topology(mesh);
+    const Box3 box = mesh.bounds();
+    nlohmann::json out;
+    out["file"] = *input;
+    out["format"] = format_name(format);
+    out["vertices"] = mesh.vertex_count();
+    out["faces"] = mesh.face_count();
+    out["attributes"] = {
+        {"normals", mesh.has_normals()}, {"colors", mesh.has_colors()}, {"uvs", mesh.has_uvs()}};
+    out["bounding_box"] = {{"min", {box.lo.x(), box.lo.y(), box.lo.z()}},
+                           {"max", {box.hi.x(), box.hi.y(), box.hi.z()}}};
+    out["diagonal"] = box.diagonal();
+    out["edges"] = topo.edges;
+    out["boundary_edges"] = topo.boundary_edges;
+    out["non_manifold_edges"] = topo.non_manifold_edges;
+    out["non_manifold_vertices"] = topo.non_manifold_vertices;
+    out["inconsistently_oriented_edges"] = topo.inconsistent_edges;
+    out["components"] = topo.components;
+    out["degenerate_faces"] = topo.degenerate_faces;
+    out["duplicate_faces"] = topo.duplicate_faces;
+    out["unreferenced_vertices"] = topo.unreferenced_vertices;
+    if (*json) {
+      std::printf("%s\n", out.dump(2).c_str());
+      return;
+    }
+    std::printf("%s (%s)\n", input->c_str(), format_name(format));
+    std::printf("  vertices               %zu\n", mesh.vertex_count());
+    std::printf("  faces                  %zu\n", mesh.face_count());
+    std::printf("  attributes             %s%s%s%s\n", mesh.has_normals() ? "normals " : "",
+                mesh.has_colors() ? "colors " : "", mesh.has_uvs() ? "uvs " : "",
+                mesh.has_normals() || mesh.has_colors() || mesh.has_uvs() ? "" : "none");
+    std::printf("  bounding box           (%g, %g, %g) .. (%g, %g, %g)\n", box.lo.x(), box.lo.y(), box.lo.z(),
+                box.hi.x(), box.hi.y(), box.hi.z());
+    std::printf("  diagonal               %g\n", box.diagonal());
+    std::printf("  edges                  %zu\n", topo.edges);
+    std::printf("  boundary edges         %zu\n", topo.boundary_edges);
+    std::printf("  non-manifold edges     %zu\n", topo.non_manifold_edges);
+    std::printf("  non-manifold vertices  %zu\n", topo.non_manifold_vertices);
+    std::printf("  misoriented edges      %zu\n", topo.inconsistent_edges);
+    std::printf("  components             %zu\n", topo.components);
+    std::printf("  degenerate faces       %zu\n", topo.degenerate_faces);
+    std::printf("  duplicate faces        %zu\n", topo.duplicate_faces);
+    std::printf("  unreferenced vertices  %zu\n", topo.unreferenced_vertices);
+  });
+}
+
+}  // namespace ocsimp::cli

@@ -1,0 +1,34 @@
+// ocsimp: simplify triangle meshes of any size. One subcommand per file in this folder.
+#include <cstdio>
+#include <exception>
+
+#include "commands.h"
+#include "ocsimp/core/error.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"ocsimp: simplify triangle meshes of any size (streaming clustering + QEM decimation)"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "ocsimp 0.1.0");
+  // Registration order is the order `ocsimp --help` lists the commands in.
+  ocsimp::cli::add_info_command(app);
+  ocsimp::cli::add_convert_command(app);
+  ocsimp::cli::add_gen_command(app);
+  // New commands: add their registration above this line.
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // Help and version exit 0; usage errors exit 2 with CLI11's one-line message.
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 2;
+  } catch (const ocsimp::Error& e) {
+    std::fprintf(stderr, "ocsimp: %s\n", e.what());
+    return 2;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "ocsimp: out of memory\n");
+    return 3;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "ocsimp: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
