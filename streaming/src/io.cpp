@@ -90,19 +90,31 @@ FileFormat detect_format(const std::string& path) {
     std::memcpy(&count, reader.data() + 80, 4);
     if (84 + 50 * static_cast<std::uint64_t>(count) == reader.file_size()) return FileFormat::stl;
   }
-  std::size_t first = 0;
-  while (first < head.size() && std::isspace(static_cast<unsigned char>(head[first]))) ++first;
-  const std::string_view text = head.substr(first);
-  if (starts_with(text, "solid") && !format_of_extension(path).has_value()) return FileFormat::stl;
-  if (starts_with(text, "solid") && format_of_extension(path) == FileFormat::stl) return FileFormat::stl;
-  if (starts_with(head, "ply")) return FileFormat::ply;  // a malformed PLY: let its parser say what is wrong
-  if (auto by_name = format_of_extension(path)) {
-    if (*by_name == FileFormat::obj || *by_name == FileFormat::stl) return *by_name;
+  // Text formats are recognized by content whatever the extension says; only bytes that are neither (a
+  // damaged binary file) fall back on the extension.
+  bool text = true;
+  for (char c : head) {
+    const auto u = static_cast<unsigned char>(c);
+    if ((u < 0x20 && !std::isspace(u)) || u == 0x7f) text = false;
   }
+  std::size_t first = starts_with(head, "\xEF\xBB\xBF") ? 3 : 0;  // UTF-8 byte order mark
+  while (first < head.size() && std::isspace(static_cast<unsigned char>(head[first]))) ++first;
+  const std::string_view rest = head.substr(first);
+  std::string lowered(rest.substr(0, 5));
+  std::transform(lowered.begin(), lowered.end(), lowered.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (lowered == "solid") {
+    // ASCII STL; or a binary STL with a "solid" header whose count is off, which its reader will report.
+    const auto by_name = format_of_extension(path);
+    if (text || !by_name || *by_name == FileFormat::stl) return FileFormat::stl;
+  }
+  if (starts_with(head, "ply")) return FileFormat::ply;  // a malformed PLY: let its parser say what is wrong
   // OBJ has no magic: accept text that starts with an OBJ statement or a comment.
-  for (std::string_view keyword :
-       {"v ", "vn ", "vt ", "f ", "#", "o ", "g ", "s ", "mtllib", "usemtl", "v\t"}) {
-    if (starts_with(text, keyword)) return FileFormat::obj;
+  if (text) {
+    for (std::string_view keyword : {"v ", "v\t", "vn ", "vn\t", "vt ", "vt\t", "vp ", "f ", "f\t", "#", "o ",
+                                     "g ", "s ", "l ", "p ", "mtllib", "usemtl"}) {
+      if (starts_with(rest, keyword)) return FileFormat::obj;
+    }
   }
   if (auto by_name = format_of_extension(path)) return *by_name;
   throw Error(path, FilePosition::byte(0), "unrecognized file format (not PLY, OBJ, STL or Draco)");
@@ -124,11 +136,20 @@ std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path, co
 
 IndexedMesh read_mesh(const std::string& path, const ReadOptions& options) {
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(path, options);
+  return read_mesh(*stream);
+}
+
+IndexedMesh read_mesh(TriangleStream& source) {
+  TriangleStream* stream = &source;
+  const std::string& path = source.path();
   IndexedMesh mesh;
   TriangleBatch batch;
   if (stream->indexed()) {
-    mesh = stream->vertices();
-    // The header's count is a hint only; grow as the data proves itself.
+    // The stream is consumed here, so its vertex array can be taken rather than copied.
+    mesh = std::move(stream->scratch_vertices());
+    // The header's count is only a hint: reserve no more than the file's size could hold (8 bytes is the
+    // shortest face record of any format), and grow past it only as the data proves itself.
+    mesh.triangles.reserve(std::min<std::uint64_t>(stream->triangles_hint(), stream->bytes_total() / 8));
     while (stream->next(batch))
       mesh.triangles.insert(mesh.triangles.end(), batch.triangles.begin(), batch.triangles.end());
   } else {

@@ -33,6 +33,8 @@ std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
 // The whole mesh in memory, built by draining the stream. Corners of a triangle soup (STL) that share a
 // position exactly are welded into one vertex.
 IndexedMesh read_mesh(const std::string& path, const ReadOptions& options = {});
+// The same for a stream already open (for callers that looked at its header first); consumes the stream.
+IndexedMesh read_mesh(TriangleStream& stream);
 
 struct WriteOptions {
   std::optional<FileFormat> format;  // default: from the output path's extension

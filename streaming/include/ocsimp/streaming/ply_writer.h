@@ -2,6 +2,7 @@
 // (the scan generator writes 10^9-triangle files through it). write_mesh() uses it too.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -34,6 +35,11 @@ class PlyStreamWriter {
   void add_vertex(const Vec3f& position, const Vec3f* normal = nullptr, const Color* color = nullptr,
                   const Vec2f* uv = nullptr);
   void add_face(const Triangle& face);
+  // The same for `count` records at once: arrays of `count` entries (nullptr for attributes the layout does
+  // not have). Checks each block of records once rather than each record; write_mesh() uses these.
+  void add_vertices(const Vec3f* positions, const Vec3f* normals, const Color* colors, const Vec2f* uvs,
+                    std::size_t count);
+  void add_faces(const Triangle* faces, std::size_t count);
   void finish();
 
   std::uint64_t bytes_written() const;

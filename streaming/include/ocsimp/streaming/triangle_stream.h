@@ -42,11 +42,17 @@ class TriangleStream {
   virtual const IndexedMesh& vertices() const = 0;
   bool indexed() const { return !vertices().positions.empty(); }
 
+  // The vertex array, writable, for the one consumer that makes its single pass over this stream and reuses
+  // the array's memory as scratch (the cluster stage packs each vertex's cell into its 12 bytes, to stay
+  // within 12 bytes a vertex). Afterwards vertices() holds that consumer's data, not positions; the array's
+  // sizes are kept. Streams never read their vertex array back after loading it, so next() is unaffected.
+  IndexedMesh& scratch_vertices() { return const_cast<IndexedMesh&>(vertices()); }
+
   // Bounding box of every vertex. Known up front for indexed streams; a soup may scan its input once for it.
   virtual Box3 bounds() = 0;
 
-  // Triangles promised by the header, or 0 when the format does not say (OBJ). Polygons may make it an
-  // underestimate: for progress only, never for allocation.
+  // Triangles promised by the header (OBJ: face statements counted by its vertex pass), or 0 when the format
+  // does not say (ASCII STL). Polygons may make it an underestimate: for progress only, never for allocation.
   virtual std::uint64_t triangles_hint() const = 0;
 
   // Progress in bytes of the input file.

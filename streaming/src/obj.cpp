@@ -1,0 +1,472 @@
+// Wavefront OBJ: text, indexed, no header, and no promise that a vertex comes before the faces using it.
+//
+// Reading takes two passes over the file (three when faces reference texture coordinates or normals):
+//   1. load every v / vt / vn record (memory grows with the records actually present, never with a count);
+//   2. (only with attributes) walk the faces to give each position the vt / vn of the first face corner that
+//      references it - OBJ indexes attributes separately, our meshes keep one of each per position, so
+//      positions shared across a uv seam keep the first corner's uv;
+//   3. stream the faces, fan-triangulating polygons.
+// Passes 2 and 3 start at the first face statement, since everything before it was loaded already.
+// Negative indices count back from the records read so far at that line, as the format specifies.
+// Accepted and ignored: comments, o g s usemtl mtllib l p vp and any unknown statement. A '\' at the end of
+// a line continues the statement on the next one.
+#include <algorithm>
+#include <charconv>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "byte_reader.h"
+#include "formats.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/atomic_file.h"
+#include "text_io.h"
+
+namespace ocsimp::detail {
+namespace {
+
+constexpr Index kNone = std::numeric_limits<Index>::max();
+// A statement continued over many lines is still held whole; beyond this it is an error, not an allocation.
+constexpr std::size_t kMaxStatementBytes = 64u << 20;
+constexpr std::uint64_t kProgressStep = 8u << 20;
+
+enum class Keyword { blank, v, vt, vn, f, other };
+
+struct RecordCounts {
+  std::uint64_t v = 0, vt = 0, vn = 0;
+};
+
+struct Corner {
+  Index v, vt, vn;  // 0-based; vt / vn are kNone when the corner has none
+};
+
+// The statement keyword of `line`; `rest` is set just past it.
+Keyword classify(std::string_view line, const char*& rest) {
+  const char* end = line.data() + line.size();
+  const char* p = skip_blanks(line.data(), end);
+  const char* e = token_end(p, end);
+  rest = e;
+  const std::size_t n = static_cast<std::size_t>(e - p);
+  if (n == 0) return Keyword::blank;
+  if (p[0] == 'v') {
+    if (n == 1) return Keyword::v;
+    if (n == 2 && p[1] == 't') return Keyword::vt;
+    if (n == 2 && p[1] == 'n') return Keyword::vn;
+  } else if (p[0] == 'f' && n == 1) {
+    return Keyword::f;
+  }
+  return Keyword::other;
+}
+
+std::uint8_t color_channel(float value) {
+  return static_cast<std::uint8_t>(std::clamp(value, 0.0f, 1.0f) * 255.0f + 0.5f);
+}
+
+class ObjStream final : public TriangleStream {
+ public:
+  ObjStream(const std::string& path, const ReadOptions& options)
+      : reader_(path),
+        lines_(reader_),
+        capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
+        progress_(options.progress) {
+    load_records();
+    passes_ = needs_attribute_pass_ ? 3 : 2;
+    if (needs_attribute_pass_) {
+      restart_pass();
+      assign_attributes();
+    }
+    restart_pass();
+  }
+
+  bool next(TriangleBatch& batch) override {
+    batch.clear();
+    while (pending_next_ < pending_.size() && batch.triangles.size() < capacity_)
+      batch.triangles.push_back(pending_[pending_next_++]);
+    std::string_view line;
+    while (batch.triangles.size() < capacity_ && next_statement(line)) {
+      const char* rest;
+      switch (classify(line, rest)) {
+        case Keyword::v:
+          ++seen_.v;
+          break;
+        case Keyword::vt:
+          ++seen_.vt;
+          break;
+        case Keyword::vn:
+          ++seen_.vn;
+          break;
+        case Keyword::f:
+          parse_face(rest, line.data() + line.size());
+          emit_fan(batch);
+          break;
+        default:
+          break;
+      }
+      report_progress();
+    }
+    return batch.size() > 0;
+  }
+
+  const IndexedMesh& vertices() const override { return vertices_; }
+  Box3 bounds() override { return bounds_; }
+  // OBJ declares nothing; this is the number of face statements counted while loading the vertices.
+  std::uint64_t triangles_hint() const override { return face_statements_; }
+  std::uint64_t bytes_read() const override { return reader_.offset(); }
+  std::uint64_t bytes_total() const override { return reader_.file_size(); }
+  const std::string& path() const override { return reader_.path(); }
+
+ private:
+  [[noreturn]] void fail(const std::string& reason) const {
+    throw Error(reader_.path(), FilePosition::line(statement_line_), reason);
+  }
+
+  // The next statement with any '\' continuations joined; blank and comment lines included.
+  bool next_statement(std::string_view& line) {
+    statement_offset_ = reader_.offset();
+    if (!lines_.next(line)) return false;
+    statement_line_ = lines_.line_number();
+    // A comment ending in '\' (a Windows path) does not swallow the next line.
+    if (line.empty() || line.back() != '\\' || *skip_blanks(line.data(), line.data() + line.size()) == '#')
+      return true;
+    joined_.assign(line.data(), line.size() - 1);
+    std::string_view more;
+    while (lines_.next(more)) {
+      joined_.push_back(' ');
+      const bool continues = !more.empty() && more.back() == '\\';
+      joined_.append(more.data(), continues ? more.size() - 1 : more.size());
+      if (joined_.size() > kMaxStatementBytes)
+        fail("statement continued over more than " + std::to_string(kMaxStatementBytes) + " bytes");
+      if (!continues) break;
+    }
+    line = joined_;
+    return true;
+  }
+
+  // Later passes only need the faces: they start at the first face statement, with the record counts the
+  // load pass saw before it (most files list every vertex first, so this skips about half the file).
+  void restart_pass() {
+    ++pass_;
+    lines_.restart_at(first_face_.offset, first_face_.line);
+    seen_ = first_face_.seen;
+    statement_line_ = 0;
+  }
+
+  void report_progress() {
+    if (!progress_) return;
+    const std::uint64_t done = (pass_ - 1) * reader_.file_size() + reader_.offset();
+    if (done < last_progress_ + kProgressStep) return;
+    last_progress_ = done;
+    progress_("read", done, passes_ * reader_.file_size());
+  }
+
+  // Pass 1: v, vt and vn records.
+  void load_records() {
+    std::string_view line;
+    while (next_statement(line)) {
+      const char* rest;
+      const char* end = line.data() + line.size();
+      switch (classify(line, rest)) {
+        case Keyword::v:
+          parse_vertex(rest, end);
+          ++seen_.v;
+          break;
+        case Keyword::vt:
+          parse_uv(rest, end);
+          ++seen_.vt;
+          break;
+        case Keyword::vn:
+          parse_normal(rest, end);
+          ++seen_.vn;
+          break;
+        case Keyword::f:
+          if (face_statements_ == 0) first_face_ = {statement_offset_, statement_line_, seen_};
+          ++face_statements_;
+          if (!faces_have_slashes_ && std::memchr(rest, '/', static_cast<std::size_t>(end - rest)))
+            faces_have_slashes_ = true;
+          break;
+        default:
+          break;
+      }
+      report_progress();
+    }
+    if (face_statements_ == 0) first_face_ = {reader_.file_size(), lines_.line_number() + 1, seen_};
+    needs_attribute_pass_ = faces_have_slashes_ && (!uv_records_.empty() || !normal_records_.empty());
+    total_ = {vertices_.positions.size(), uv_records_.size(), normal_records_.size()};
+  }
+
+  // Up to `max` numbers into `values`; returns how many there were.
+  int parse_numbers(const char* p, const char* end, float* values, int max) {
+    int count = 0;
+    while (true) {
+      float value;
+      const NumberStatus status = parse_float(p, end, value);
+      if (status == NumberStatus::missing) return count;
+      if (status != NumberStatus::ok) fail(describe(status, p, end));
+      if (count == max) fail("too many numbers: " + quote_token(p, end) + " after " + std::to_string(max));
+      values[count++] = value;
+    }
+  }
+
+  void parse_vertex(const char* p, const char* end) {
+    float values[7];
+    const int count = parse_numbers(p, end, values, 7);
+    if (count != 3 && count != 4 && count != 6 && count != 7)
+      fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
+           " numbers)");
+    if (vertices_.positions.size() >= kNone) fail("more than 2^32-2 vertices");
+    const Vec3f position(values[0], values[1], values[2]);
+    vertices_.positions.push_back(position);
+    bounds_.add(position);
+    const bool has_color = count >= 6;
+    if (has_color && vertices_.colors.empty())
+      vertices_.colors.assign(vertices_.positions.size() - 1, Color{255, 255, 255, 255});
+    if (has_color) {
+      const float* rgb = values + (count - 3);
+      vertices_.colors.push_back({color_channel(rgb[0]), color_channel(rgb[1]), color_channel(rgb[2]), 255});
+    } else if (!vertices_.colors.empty()) {
+      vertices_.colors.push_back({255, 255, 255, 255});
+    }
+  }
+
+  void parse_uv(const char* p, const char* end) {
+    float values[3];
+    const int count = parse_numbers(p, end, values, 3);
+    if (count == 0) fail("a texture coordinate needs u [v [w]]");
+    uv_records_.emplace_back(values[0], count > 1 ? values[1] : 0.0f);
+  }
+
+  void parse_normal(const char* p, const char* end) {
+    float values[3];
+    if (parse_numbers(p, end, values, 3) != 3) fail("a normal needs x y z");
+    normal_records_.emplace_back(values[0], values[1], values[2]);
+  }
+
+  // One index of a face corner: 1-based, or negative to count back from the `seen` records so far.
+  Index parse_index(const char*& p, const char* end, std::uint64_t seen, std::uint64_t total,
+                    const char* what, const char* corner) {
+    bool negative = false;
+    if (p < end && (*p == '-' || *p == '+')) negative = *p++ == '-';
+    const char* digits = p;
+    std::uint64_t value = 0;
+    for (; p < end && static_cast<unsigned char>(*p - '0') < 10; ++p)
+      value = value * 10 + static_cast<unsigned>(*p - '0');
+    if (p == digits) fail("malformed face corner " + quote_token(corner, end));
+    if (p - digits > 12) value = std::uint64_t(1) << 40;  // past any count; the digits above may have wrapped
+    if (value == 0)
+      fail(std::string(what) + " index 0 in " + quote_token(corner, end) + " (OBJ counts from 1)");
+    if (negative) {
+      if (value > seen)
+        fail("relative " + std::string(what) + " index -" + std::to_string(value) +
+             " reaches before the first " + what + " (" + std::to_string(seen) + " so far)");
+      return static_cast<Index>(seen - value);
+    }
+    if (value > total)
+      fail(std::string(what) + " index " + std::to_string(value) + " out of range (the file has " +
+           std::to_string(total) + ")");
+    return static_cast<Index>(value - 1);
+  }
+
+  // Corners of the face statement into corners_: "v", "v/vt", "v//vn" or "v/vt/vn" each.
+  void parse_face(const char* p, const char* end) {
+    corners_.clear();
+    while ((p = skip_blanks(p, end)) < end) {
+      const char* corner = p;
+      Corner c{parse_index(p, end, seen_.v, total_.v, "vertex", corner), kNone, kNone};
+      if (p < end && *p == '/') {
+        ++p;
+        if (p < end && *p != '/')
+          c.vt = parse_index(p, end, seen_.vt, total_.vt, "texture coordinate", corner);
+        if (p < end && *p == '/') {
+          ++p;
+          c.vn = parse_index(p, end, seen_.vn, total_.vn, "normal", corner);
+        }
+      }
+      if (p < end && !is_blank(*p)) fail("malformed face corner " + quote_token(corner, end));
+      corners_.push_back(c);
+    }
+    if (corners_.size() < 3)
+      fail("a face needs at least 3 corners (found " + std::to_string(corners_.size()) + ")");
+  }
+
+  void emit_fan(TriangleBatch& batch) {
+    pending_.clear();
+    pending_next_ = 0;
+    for (std::size_t i = 1; i + 1 < corners_.size(); ++i) {
+      const Triangle t{corners_[0].v, corners_[i].v, corners_[i + 1].v};
+      if (batch.triangles.size() < capacity_) {
+        batch.triangles.push_back(t);
+      } else {
+        pending_.push_back(t);
+      }
+    }
+  }
+
+  // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn.
+  void assign_attributes() {
+    const std::size_t n = vertices_.positions.size();
+    std::vector<std::uint8_t> has_uv, has_normal;
+    std::string_view line;
+    while (next_statement(line)) {
+      const char* rest;
+      switch (classify(line, rest)) {
+        case Keyword::v:
+          ++seen_.v;
+          break;
+        case Keyword::vt:
+          ++seen_.vt;
+          break;
+        case Keyword::vn:
+          ++seen_.vn;
+          break;
+        case Keyword::f:
+          parse_face(rest, line.data() + line.size());
+          for (const Corner& c : corners_) {
+            if (c.vt != kNone) {
+              if (has_uv.empty()) {
+                has_uv.assign(n, 0);
+                vertices_.uvs.assign(n, Vec2f::Zero());
+              }
+              if (!has_uv[c.v]) {
+                has_uv[c.v] = 1;
+                vertices_.uvs[c.v] = uv_records_[c.vt];
+              }
+            }
+            if (c.vn != kNone) {
+              if (has_normal.empty()) {
+                has_normal.assign(n, 0);
+                vertices_.normals.assign(n, Vec3f::Zero());
+              }
+              if (!has_normal[c.v]) {
+                has_normal[c.v] = 1;
+                vertices_.normals[c.v] = normal_records_[c.vn];
+              }
+            }
+          }
+          break;
+        default:
+          break;
+      }
+      report_progress();
+    }
+    uv_records_ = {};
+    normal_records_ = {};
+  }
+
+  ByteReader reader_;
+  LineReader lines_;
+  std::size_t capacity_;
+  ProgressFn progress_;
+
+  IndexedMesh vertices_;
+  Box3 bounds_;
+  std::vector<Vec2f> uv_records_;
+  std::vector<Vec3f> normal_records_;
+  RecordCounts total_;
+  RecordCounts seen_;  // records passed so far in the current pass, for relative indices
+  std::uint64_t face_statements_ = 0;
+  bool faces_have_slashes_ = false;
+  bool needs_attribute_pass_ = false;
+
+  struct Resume {
+    std::uint64_t offset = 0, line = 1;
+    RecordCounts seen;
+  };
+  Resume first_face_;
+
+  std::uint64_t statement_line_ = 0;
+  std::uint64_t statement_offset_ = 0;
+  std::string joined_;
+  std::vector<Corner> corners_;
+  std::vector<Triangle> pending_;  // the rest of a polygon's fan that did not fit the last batch
+  std::size_t pending_next_ = 0;
+
+  std::uint64_t pass_ = 1, passes_ = 2;
+  std::uint64_t last_progress_ = 0;
+};
+
+char* print_index(char* out, Index i) {
+  return std::to_chars(out, out + 12, std::uint64_t(i) + 1).ptr;
+}
+
+}  // namespace
+
+std::unique_ptr<TriangleStream> open_obj_stream(const std::string& path, const ReadOptions& options) {
+  return std::make_unique<ObjStream>(path, options);
+}
+
+void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
+  check_writable(path, mesh);
+  AtomicFile file(path);
+  file.write("# ocsimp: " + std::to_string(mesh.positions.size()) + " vertices, " +
+             std::to_string(mesh.triangles.size()) + " triangles\n");
+  const bool colors = mesh.has_colors(), uvs = mesh.has_uvs(), normals = mesh.has_normals();
+  for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+    char* const start = file.reserve(128);
+    char* p = start;
+    *p++ = 'v';
+    for (int k = 0; k < 3; ++k) {
+      *p++ = ' ';
+      p = print_float(p, mesh.positions[i][k]);
+    }
+    if (colors) {
+      // OBJ's color extension has no alpha.
+      for (int k = 0; k < 3; ++k) {
+        *p++ = ' ';
+        p = print_float(p, float(mesh.colors[i][k]) / 255.0f);
+      }
+    }
+    *p++ = '\n';
+    file.advance(static_cast<std::size_t>(p - start));
+  }
+  for (std::size_t i = 0; uvs && i < mesh.uvs.size(); ++i) {
+    char* const start = file.reserve(64);
+    char* p = start;
+    *p++ = 'v';
+    *p++ = 't';
+    for (int k = 0; k < 2; ++k) {
+      *p++ = ' ';
+      p = print_float(p, mesh.uvs[i][k]);
+    }
+    *p++ = '\n';
+    file.advance(static_cast<std::size_t>(p - start));
+  }
+  for (std::size_t i = 0; normals && i < mesh.normals.size(); ++i) {
+    char* const start = file.reserve(64);
+    char* p = start;
+    *p++ = 'v';
+    *p++ = 'n';
+    for (int k = 0; k < 3; ++k) {
+      *p++ = ' ';
+      p = print_float(p, mesh.normals[i][k]);
+    }
+    *p++ = '\n';
+    file.advance(static_cast<std::size_t>(p - start));
+  }
+  const std::size_t faces = mesh.triangles.size();
+  for (std::size_t f = 0; f < faces; ++f) {
+    char* const start = file.reserve(128);
+    char* p = start;
+    *p++ = 'f';
+    for (Index v : mesh.triangles[f]) {
+      *p++ = ' ';
+      p = print_index(p, v);
+      if (uvs || normals) {
+        *p++ = '/';
+        if (uvs) p = print_index(p, v);
+        if (normals) {
+          *p++ = '/';
+          p = print_index(p, v);
+        }
+      }
+    }
+    *p++ = '\n';
+    file.advance(static_cast<std::size_t>(p - start));
+    if ((f & 0xFFFF) == 0xFFFF) report(options.progress, "write", f + 1, faces);
+  }
+  file.commit();
+  report(options.progress, "write", faces, faces);
+}
+
+}  // namespace ocsimp::detail

@@ -1,0 +1,1179 @@
+// The PLY reader: a TriangleStream over ascii, binary_little_endian and binary_big_endian files of any
+// element and property layout.
+//
+// The vertex element is decoded once, in the constructor, into an IndexedMesh; faces are then decoded batch
+// by batch. Elements other than "vertex" and "face" (or "tristrips") are skipped. When the face element
+// precedes the vertex element, a first pass walks past the faces (checking their structure) to reach the
+// vertices, then seeks back, so memory never holds more than the vertices and one batch.
+//
+// Common layouts take fast paths: vertex records of exactly float x,y,z are copied in bulk, binary face
+// records that hold only an int/uint index list are decoded at fixed offsets while their count is 3, and
+// ascii numbers are parsed in place (fast_float for reals, by hand for integers). Everything else goes
+// through a general path that reads one value at a time and can stop mid-polygon when a batch is full.
+//
+// Nothing is allocated from a header count until the data has shown it can hold it: fixed-size binary vertex
+// records are checked against the file size first, other layouts reserve what the remaining bytes could hold
+// at the least and grow; faces are streamed.
+
+#include <fast_float/fast_float.h>
+#include <sys/mman.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <optional>
+
+#include "byte_reader.h"
+#include "formats.h"
+#include "ocsimp/core/error.h"
+#include "ply_header.h"
+
+namespace ocsimp::detail {
+namespace {
+
+// Large enough that read(2) costs little per byte, small enough to stay in cache between the kernel's copy
+// and our parse: draining a 10M-triangle binary file took 37 ms of CPU with 1 MiB, 41-43 ms with 64-256 KiB
+// and 42+ ms with 4 MiB. Also the longest ascii line we accept.
+constexpr std::size_t kBufferBytes = 1 << 20;
+constexpr std::uint64_t kProgressBytes = 8 << 20;
+
+// ---- Binary loads ----------------------------------------------------------------------------------------
+
+template <class T>
+T byte_swapped(T value) {
+  if constexpr (sizeof(T) == 1) {
+    return value;
+  } else {
+    using Bits = std::conditional_t<sizeof(T) == 2, std::uint16_t,
+                                    std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>>;
+    Bits bits;
+    std::memcpy(&bits, &value, sizeof bits);
+    if constexpr (sizeof(T) == 2) bits = __builtin_bswap16(bits);
+    if constexpr (sizeof(T) == 4) bits = __builtin_bswap32(bits);
+    if constexpr (sizeof(T) == 8) bits = __builtin_bswap64(bits);
+    std::memcpy(&value, &bits, sizeof bits);
+    return value;
+  }
+}
+
+template <class T, bool Swap>
+T load(const char* p) {
+  T value;
+  std::memcpy(&value, p, sizeof value);
+  if constexpr (Swap) value = byte_swapped(value);
+  return value;
+}
+
+template <bool Swap>
+double load_number(const char* p, PlyType type) {
+  switch (type) {
+    case PlyType::int8:
+      return load<std::int8_t, Swap>(p);
+    case PlyType::uint8:
+      return load<std::uint8_t, Swap>(p);
+    case PlyType::int16:
+      return load<std::int16_t, Swap>(p);
+    case PlyType::uint16:
+      return load<std::uint16_t, Swap>(p);
+    case PlyType::int32:
+      return load<std::int32_t, Swap>(p);
+    case PlyType::uint32:
+      return load<std::uint32_t, Swap>(p);
+    case PlyType::float32:
+      return load<float, Swap>(p);
+    case PlyType::float64:
+      return load<double, Swap>(p);
+  }
+  return 0;
+}
+
+// Narrowing that saturates to +-inf instead of being undefined outside float's range.
+float to_float(double value) {
+  if (value > std::numeric_limits<float>::max()) return std::numeric_limits<float>::infinity();
+  if (value < -std::numeric_limits<float>::max()) return -std::numeric_limits<float>::infinity();
+  return static_cast<float>(value);
+}
+
+// An integer-valued double in [-2^63, 2^63) as an integer; nullopt for fractions, NaN and huge values.
+std::optional<std::int64_t> exact_integer(double value) {
+  if (!(value >= -9.2e18 && value <= 9.2e18)) return std::nullopt;
+  const auto integer = static_cast<std::int64_t>(value);
+  if (static_cast<double>(integer) != value) return std::nullopt;
+  return integer;
+}
+
+std::uint8_t color_channel(double value, PlyType type) {
+  if (ply_type_is_integer(type)) return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
+  // Floating-point colors are in [0, 1].
+  if (!(value > 0.0)) return 0;
+  if (value >= 1.0) return 255;
+  return static_cast<std::uint8_t>(std::lround(value * 255.0));
+}
+
+// Grows lo/hi (3 floats each) over n packed x y z triples. Returns the index of the first point with a NaN or
+// infinite coordinate, or n. Takes 4 points (12 floats, three 4-float vectors) at a time: a per-point loop
+// made this check cost as much as reading the vertices, and GCC does not vectorize the plain 12-lane loop.
+using Float4 = float __attribute__((vector_size(16)));
+
+std::size_t scan_points(const float* xyz, std::size_t n, float* lo, float* hi) {
+  // Lane k of vector j holds coordinate (4 j + k) % 3.
+  Float4 lo_v[3] = {{lo[0], lo[1], lo[2], lo[0]}, {lo[1], lo[2], lo[0], lo[1]}, {lo[2], lo[0], lo[1], lo[2]}};
+  Float4 hi_v[3] = {{hi[0], hi[1], hi[2], hi[0]}, {hi[1], hi[2], hi[0], hi[1]}, {hi[2], hi[0], hi[1], hi[2]}};
+  Float4 nonfinite = {0, 0, 0, 0};  // v - v is 0 for finite v and NaN for inf or NaN; NaN then sticks
+  std::size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    for (int j = 0; j < 3; ++j) {
+      Float4 v;
+      std::memcpy(&v, xyz + 3 * i + 4 * j, sizeof v);
+      lo_v[j] = v < lo_v[j] ? v : lo_v[j];
+      hi_v[j] = v > hi_v[j] ? v : hi_v[j];
+      nonfinite += v - v;
+    }
+  }
+  bool special = false;
+  for (int k = 0; k < 4; ++k) special |= nonfinite[k] != 0;
+  for (int j = 0; j < 3; ++j) {
+    for (int k = 0; k < 4; ++k) {
+      lo[(4 * j + k) % 3] = std::min(lo[(4 * j + k) % 3], lo_v[j][k]);
+      hi[(4 * j + k) % 3] = std::max(hi[(4 * j + k) % 3], hi_v[j][k]);
+    }
+  }
+  for (; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const float v = xyz[3 * i + k];
+      special |= !std::isfinite(v);
+      lo[k] = std::min(lo[k], v);
+      hi[k] = std::max(hi[k], v);
+    }
+  }
+  if (special) {
+    for (std::size_t j = 0; j < 3 * n; ++j) {
+      if (!std::isfinite(xyz[j])) return j / 3;
+    }
+  }
+  return n;
+}
+
+// Asks for transparent huge pages for a large array before its first touch. Faulting a 60 MB vertex array in
+// 4 KiB pages took ~40% of reading a 10M-triangle file (bench/io_throughput.sh); 2 MiB pages make it
+// negligible. Advice only: where it is refused nothing changes.
+template <class T>
+void advise_huge_pages(const std::vector<T>& array) {
+  constexpr std::uintptr_t kHuge = std::uintptr_t(2) << 20;
+  const std::size_t bytes = array.capacity() * sizeof(T);
+  if (bytes < 4 * kHuge) return;
+  const auto start = reinterpret_cast<std::uintptr_t>(array.data());
+  const std::uintptr_t begin = (start + kHuge - 1) & ~(kHuge - 1);
+  const std::uintptr_t end = (start + bytes) & ~(kHuge - 1);
+  if (end > begin) ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+}
+
+// ---- Vertex properties we keep ----------------------------------------------------------------------------
+
+enum class Slot : std::uint8_t { none, x, y, z, nx, ny, nz, red, green, blue, alpha, u, v };
+
+struct VertexValues {
+  float position[3] = {0, 0, 0};
+  float normal[3] = {0, 0, 0};
+  Color color = {0, 0, 0, 255};
+  float uv[2] = {0, 0};
+};
+
+void set_value(VertexValues& values, Slot slot, PlyType type, double value) {
+  switch (slot) {
+    case Slot::none:
+      break;
+    case Slot::x:
+    case Slot::y:
+    case Slot::z:
+      values.position[int(slot) - int(Slot::x)] = to_float(value);
+      break;
+    case Slot::nx:
+    case Slot::ny:
+    case Slot::nz:
+      values.normal[int(slot) - int(Slot::nx)] = to_float(value);
+      break;
+    case Slot::red:
+    case Slot::green:
+    case Slot::blue:
+    case Slot::alpha:
+      values.color[int(slot) - int(Slot::red)] = color_channel(value, type);
+      break;
+    case Slot::u:
+    case Slot::v:
+      values.uv[int(slot) - int(Slot::u)] = to_float(value);
+      break;
+  }
+}
+
+// Where each property of the vertex element goes. Attributes are kept only when complete (all of nx ny nz,
+// all of red green blue, both texture coordinates).
+struct VertexPlan {
+  std::vector<Slot> slots;  // one per property
+  bool normals = false, colors = false, uvs = false;
+};
+
+VertexPlan plan_vertices(const std::string& path, const PlyElement& element) {
+  VertexPlan plan;
+  plan.slots.assign(element.properties.size(), Slot::none);
+  auto scalar = [&](std::string_view name) -> std::optional<std::size_t> {
+    auto index = element.find(name);
+    if (index && element.properties[*index].is_list) return std::nullopt;
+    return index;
+  };
+  for (const char* axis : {"x", "y", "z"}) {
+    const auto index = element.find(axis);
+    if (!index) {
+      throw Error(path, FilePosition::line(element.header_line),
+                  std::string("the vertex element has no property ") + axis);
+    }
+    if (element.properties[*index].is_list) {
+      throw Error(path, FilePosition::line(element.properties[*index].header_line),
+                  std::string("vertex property ") + axis + " is a list, not a number");
+    }
+  }
+  // Assigns `slots` to the first spelling whose every name is a scalar property.
+  auto assign = [&](std::initializer_list<std::initializer_list<const char*>> spellings,
+                    std::initializer_list<Slot> slots) {
+    for (const auto& names : spellings) {
+      std::vector<std::size_t> found;
+      for (const char* name : names) {
+        if (auto index = scalar(name)) found.push_back(*index);
+      }
+      if (found.size() != names.size()) continue;
+      auto slot = slots.begin();
+      for (std::size_t index : found) plan.slots[index] = *slot++;
+      return true;
+    }
+    return false;
+  };
+  assign({{"x", "y", "z"}}, {Slot::x, Slot::y, Slot::z});
+  plan.normals = assign({{"nx", "ny", "nz"}}, {Slot::nx, Slot::ny, Slot::nz});
+  plan.colors = assign({{"red", "green", "blue"}, {"diffuse_red", "diffuse_green", "diffuse_blue"}},
+                       {Slot::red, Slot::green, Slot::blue});
+  if (plan.colors) {
+    if (auto alpha = scalar("alpha"))
+      plan.slots[*alpha] = Slot::alpha;
+    else if (auto diffuse_alpha = scalar("diffuse_alpha"))
+      plan.slots[*diffuse_alpha] = Slot::alpha;
+  }
+  plan.uvs = assign({{"u", "v"}, {"s", "t"}, {"texture_u", "texture_v"}, {"texture_s", "texture_t"}},
+                    {Slot::u, Slot::v});
+  return plan;
+}
+
+// ---- The stream
+// ---------------------------------------------------------------------------------------------
+
+class PlyStream final : public TriangleStream {
+ public:
+  PlyStream(const std::string& path, const ReadOptions& options);
+
+  bool next(TriangleBatch& batch) override;
+  const IndexedMesh& vertices() const override { return vertices_; }
+  Box3 bounds() override { return bounds_; }
+  std::uint64_t triangles_hint() const override { return triangles_hint_; }
+  std::uint64_t bytes_read() const override;
+  std::uint64_t bytes_total() const override { return bytes_total_; }
+  const std::string& path() const override { return reader_.path(); }
+
+ private:
+  // -- positions for errors
+  std::uint64_t byte_position() const {
+    return ascii_ ? reader_.offset() + static_cast<std::uint64_t>(cursor_ - reader_.data())
+                  : reader_.offset();
+  }
+  [[noreturn]] void fail(const std::string& reason) const {
+    if (ascii_) throw Error(path(), FilePosition::line(line_), reason);
+    throw Error(path(), FilePosition::byte(reader_.offset()), reason);
+  }
+  [[noreturn]] void fail_at_byte(std::uint64_t offset, const std::string& reason) const {
+    throw Error(path(), FilePosition::byte(offset), reason);
+  }
+  [[noreturn]] void fail_truncated() const;
+  std::string where() const;  // "record R of element 'NAME'"
+
+  // -- binary input
+  const char* need(std::size_t bytes) {
+    if (reader_.available() < bytes && reader_.fill(bytes) < bytes) fail_truncated();
+    return reader_.data();
+  }
+  void skip_bytes(std::uint64_t bytes);
+
+  // -- ascii input: `cursor_` walks complete lines in [reader_.data(), lines_end_)
+  bool begin_ascii_record();  // false at the end of the file
+  void end_ascii_record();
+  void refill_lines();
+  std::string_view ascii_token(PlyType type);
+  double ascii_number(PlyType type);
+  std::int64_t ascii_integer(PlyType type);
+  std::int64_t ascii_integer_slow(PlyType type);
+  void read_ascii_triangles();
+  void skip_ascii_spaces() {
+    while (cursor_ < lines_end_ && (*cursor_ == ' ' || *cursor_ == '\t' || *cursor_ == '\r')) ++cursor_;
+  }
+
+  // -- values of either encoding
+  double read_number(PlyType type);
+  std::int64_t read_integer(PlyType type, const char* what);
+  std::uint64_t read_list_count(const PlyProperty& property);
+  void skip_property(const PlyProperty& property);
+
+  // -- elements
+  void begin_record();
+  void end_record();
+  void skip_element(std::size_t element);
+  void load_vertices();
+  template <bool Swap>
+  void load_fixed_vertices(const std::vector<std::size_t>& offsets);
+  void load_vertex_records();
+  void add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset);
+  void check_end_of_data();
+  void report_progress(bool final = false);
+
+  // -- faces
+  void read_face_values();
+  void add_corner(std::int64_t index, std::uint64_t offset);
+  template <class CountT, class IndexT, bool Swap>
+  void read_triangle_records();
+  bool read_fast_faces();
+  void finish_faces();
+
+  detail::ByteReader reader_;
+  ProgressFn progress_;
+  std::size_t capacity_;
+  PlyHeader header_;
+  bool ascii_ = false;
+  bool swap_ = false;  // the file's byte order is not ours
+
+  IndexedMesh vertices_;
+  Box3 bounds_;
+  VertexPlan vertex_plan_;
+  std::size_t vertex_element_ = 0;
+  std::uint64_t vertex_count_ = 0;
+
+  std::size_t face_element_ = 0;
+  std::size_t index_property_ = 0;
+  bool strips_ = false;       // "tristrips": one long list, -1 ends a strip
+  bool faces_first_ = false;  // the face element comes before the vertex element
+  bool fast_faces_ = false;   // the face record is just the index list
+  std::uint64_t face_offset_ = 0, face_line_ = 0, face_bytes_ = 0;
+  std::uint64_t triangles_hint_ = 0;
+  std::uint64_t bytes_total_ = 0;
+
+  // The element being read, for error messages and ascii record counts.
+  std::size_t current_element_ = 0;
+  std::uint64_t current_record_ = 0;
+
+  // The batch being filled by next().
+  Triangle* out_ = nullptr;
+  std::size_t filled_ = 0;
+
+  // Face decoding state, kept across batches: we may stop in the middle of a record.
+  bool in_record_ = false;
+  std::size_t next_property_ = 0;
+  std::uint64_t list_left_ = 0;
+  bool in_list_ = false;
+  std::int64_t first_corner_ = 0, previous_corner_ = 0;  // fan: first and previous corner
+  std::uint64_t corners_seen_ = 0;                       // in this polygon or strip
+  std::int64_t strip_before_ = 0;                        // strips: the corner before previous_corner_
+  std::uint64_t triangles_emitted_ = 0;
+  bool faces_done_ = false;
+  bool second_pass_ = false;  // reading the faces again after a first pass over the whole file
+
+  // Ascii cursor.
+  const char* cursor_ = nullptr;
+  const char* lines_end_ = nullptr;
+  bool file_end_ = false;  // lines_end_ is the end of the file, not of a line
+  std::uint64_t line_ = 0;
+
+  std::uint64_t next_progress_ = kProgressBytes;
+};
+
+PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
+    : reader_(path, kBufferBytes),
+      progress_(options.progress),
+      capacity_(std::max<std::size_t>(options.batch_capacity, 1)) {
+  header_ = parse_ply_header(reader_);
+  ascii_ = header_.encoding == PlyEncoding::ascii;
+  swap_ = !ascii_ &&
+          ((header_.encoding == PlyEncoding::binary_big_endian) != (std::endian::native == std::endian::big));
+  line_ = header_.data_line;
+  cursor_ = lines_end_ = reader_.data();
+  const std::uint64_t end_header_line = header_.data_line - 1;
+
+  auto find_element = [&](std::string_view name) -> std::optional<std::size_t> {
+    for (std::size_t i = 0; i < header_.elements.size(); ++i) {
+      if (header_.elements[i].name == name) return i;
+    }
+    return std::nullopt;
+  };
+  const auto vertex = find_element("vertex");
+  if (!vertex)
+    throw Error(path, FilePosition::line(end_header_line), "the header declares no vertex element");
+  vertex_element_ = *vertex;
+  const PlyElement& vertex_element = header_.elements[vertex_element_];
+  vertex_count_ = vertex_element.count;
+  if (vertex_count_ > std::numeric_limits<Index>::max()) {
+    throw Error(path, FilePosition::line(vertex_element.header_line),
+                "element vertex " + std::to_string(vertex_count_) + " is more than 2^32-1 vertices");
+  }
+  vertex_plan_ = plan_vertices(path, vertex_element);
+
+  auto face = find_element("face");
+  if (!face) {
+    face = find_element("tristrips");
+    strips_ = face.has_value();
+  }
+  if (!face) {
+    throw Error(path, FilePosition::line(end_header_line),
+                "the header declares no face element (a point cloud is not a mesh)");
+  }
+  face_element_ = *face;
+  const PlyElement& face_element = header_.elements[face_element_];
+  auto list = face_element.find("vertex_indices");
+  if (!list) list = face_element.find("vertex_index");
+  if (!list) {
+    throw Error(path, FilePosition::line(face_element.header_line),
+                "element " + face_element.name + " has no vertex_indices list");
+  }
+  index_property_ = *list;
+  const PlyProperty& index_property = face_element.properties[index_property_];
+  if (!index_property.is_list) {
+    throw Error(path, FilePosition::line(index_property.header_line),
+                "property " + index_property.name + " must be a list");
+  }
+  if (face_element.count == 0) {
+    throw Error(path, FilePosition::line(face_element.header_line),
+                "element " + face_element.name + " is empty");
+  }
+  faces_first_ = face_element_ < vertex_element_;
+  fast_faces_ = !strips_ && face_element.properties.size() == 1 &&
+                (ascii_ ? ply_type_is_integer(index_property.type)
+                        : index_property.type == PlyType::int32 || index_property.type == PlyType::uint32);
+
+  // The count is only a hint, but bound it by what the file could hold so no one is misled by 10^15.
+  const std::uint64_t data_bytes = reader_.file_size() - header_.data_offset;
+  const std::uint64_t min_face_bytes =
+      ascii_ ? 8 : ply_type_size(index_property.count_type) + 3 * ply_type_size(index_property.type);
+  triangles_hint_ = strips_ ? 0 : std::min(face_element.count, data_bytes / min_face_bytes);
+  bytes_total_ = reader_.file_size();
+
+  std::size_t element = 0;
+  for (; element < vertex_element_; ++element) {
+    if (element == face_element_) {
+      face_offset_ = byte_position();
+      face_line_ = line_;
+    }
+    skip_element(element);
+    if (element == face_element_) face_bytes_ = byte_position() - face_offset_;
+  }
+  load_vertices();
+  if (faces_first_) {
+    // Check the rest of the file now, then come back for the faces.
+    for (++element; element < header_.elements.size(); ++element) skip_element(element);
+    check_end_of_data();
+    reader_.seek(face_offset_);
+    cursor_ = lines_end_ = reader_.data();
+    file_end_ = false;
+    line_ = face_line_;
+    bytes_total_ += face_bytes_;
+    second_pass_ = true;
+  } else {
+    for (++element; element < face_element_; ++element) skip_element(element);
+  }
+  current_element_ = face_element_;
+  current_record_ = 0;
+}
+
+std::uint64_t PlyStream::bytes_read() const {
+  const std::uint64_t position = byte_position();
+  // A second pass over the faces counts on top of the first full pass.
+  return second_pass_ ? reader_.file_size() + (position - face_offset_) : position;
+}
+
+std::string PlyStream::where() const {
+  const PlyElement& element = header_.elements[current_element_];
+  return "record " + std::to_string(current_record_) + " of element " + element.name + " (" +
+         std::to_string(element.count) + " declared)";
+}
+
+void PlyStream::fail_truncated() const {
+  if (ascii_) fail("the file ends in " + where());
+  throw Error(path(), FilePosition::byte(reader_.file_size()), "the file ends in " + where());
+}
+
+void PlyStream::report_progress(bool final) {
+  const std::uint64_t done = bytes_read();
+  if (done >= next_progress_ || final) {
+    next_progress_ = done + kProgressBytes;
+    report(progress_, "read", done, bytes_total_);
+  }
+}
+
+void PlyStream::skip_bytes(std::uint64_t bytes) {
+  if (bytes <= reader_.available()) {
+    reader_.consume(static_cast<std::size_t>(bytes));
+    return;
+  }
+  const std::uint64_t offset = reader_.offset();
+  if (bytes > reader_.file_size() - offset) fail_truncated();
+  reader_.seek(offset + bytes);
+}
+
+// ---- Ascii ------------------------------------------------------------------------------------------------
+
+void PlyStream::refill_lines() {
+  reader_.consume(static_cast<std::size_t>(cursor_ - reader_.data()));
+  // fill() stops short of the capacity only at the end of the file.
+  const std::size_t available = reader_.fill(reader_.capacity());
+  const char* begin = reader_.data();
+  cursor_ = begin;
+  if (available < reader_.capacity()) {
+    lines_end_ = begin + available;  // the rest of the file; its last line may lack a newline
+    file_end_ = true;
+    return;
+  }
+  const void* last_newline = memrchr(begin, '\n', available);
+  if (last_newline == nullptr) fail("a line longer than " + std::to_string(reader_.capacity()) + " bytes");
+  lines_end_ = static_cast<const char*>(last_newline) + 1;
+  file_end_ = false;
+}
+
+bool PlyStream::begin_ascii_record() {
+  while (true) {
+    skip_ascii_spaces();
+    if (cursor_ == lines_end_) {
+      if (file_end_) return false;
+      refill_lines();
+      if (cursor_ == lines_end_) return false;
+      continue;
+    }
+    if (*cursor_ != '\n') return true;
+    ++cursor_;
+    ++line_;
+  }
+}
+
+void PlyStream::end_ascii_record() {
+  skip_ascii_spaces();
+  if (cursor_ == lines_end_) return;  // the last line of the file
+  if (*cursor_ != '\n') {
+    const char* end = cursor_;
+    while (end < lines_end_ && *end != ' ' && *end != '\t' && *end != '\r' && *end != '\n' &&
+           end - cursor_ < 32)
+      ++end;
+    fail("unexpected value '" + std::string(cursor_, end) + "' after the end of " + where());
+  }
+  ++cursor_;
+  ++line_;
+}
+
+std::string_view PlyStream::ascii_token(PlyType type) {
+  skip_ascii_spaces();
+  const char* begin = cursor_;
+  while (cursor_ < lines_end_ && *cursor_ != ' ' && *cursor_ != '\t' && *cursor_ != '\r' && *cursor_ != '\n')
+    ++cursor_;
+  if (cursor_ == begin) {
+    fail(std::string("the line ends early: expected a ") + ply_type_name(type) + " in " + where());
+  }
+  return std::string_view(begin, static_cast<std::size_t>(cursor_ - begin));
+}
+
+namespace {
+
+bool is_ascii_delimiter(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\n';
+}
+
+std::pair<std::int64_t, std::int64_t> integer_range(PlyType type) {
+  switch (type) {
+    case PlyType::int8:
+      return {INT8_MIN, INT8_MAX};
+    case PlyType::uint8:
+      return {0, UINT8_MAX};
+    case PlyType::int16:
+      return {INT16_MIN, INT16_MAX};
+    case PlyType::uint16:
+      return {0, UINT16_MAX};
+    case PlyType::int32:
+      return {INT32_MIN, INT32_MAX};
+    case PlyType::uint32:
+      return {0, UINT32_MAX};
+    case PlyType::float32:
+    case PlyType::float64:
+      break;
+  }
+  return {INT64_MIN, INT64_MAX};
+}
+
+}  // namespace
+
+// Parses straight from the cursor, without finding the token's end first: values are the bulk of an ascii
+// file. Anything unusual (a sign without digits, a stray character, a huge number) goes to the careful
+// token-based parse below, which also words the error.
+std::int64_t PlyStream::ascii_integer(PlyType type) {
+  skip_ascii_spaces();
+  const char* p = cursor_;
+  const bool negative = p < lines_end_ && *p == '-';
+  if (p < lines_end_ && (*p == '-' || *p == '+')) ++p;
+  const char* const digits = p;
+  std::int64_t magnitude = 0;
+  // Twelve digits cannot overflow and exceed every PLY integer type.
+  while (p < lines_end_ && static_cast<unsigned>(*p - '0') <= 9 && p - digits < 12) {
+    magnitude = magnitude * 10 + (*p - '0');
+    ++p;
+  }
+  if (p == digits || (p < lines_end_ && !is_ascii_delimiter(*p))) return ascii_integer_slow(type);
+  const std::int64_t value = negative ? -magnitude : magnitude;
+  const auto [lo, hi] = integer_range(type);
+  if (value < lo || value > hi) return ascii_integer_slow(type);
+  cursor_ = p;
+  return value;
+}
+
+std::int64_t PlyStream::ascii_integer_slow(PlyType type) {
+  const std::string_view token = ascii_token(type);
+  std::size_t i = 0;
+  const bool negative = token[0] == '-';
+  if (negative || token[0] == '+') ++i;
+  if (i == token.size()) fail("'" + std::string(token) + "' is not an integer");
+  std::uint64_t magnitude = 0;
+  for (; i < token.size(); ++i) {
+    const unsigned digit = static_cast<unsigned char>(token[i]) - '0';
+    if (digit > 9) fail("'" + std::string(token) + "' is not an integer");
+    // Every PLY integer type fits in 32 bits; anything past 2^40 is out of range whatever the type.
+    if (magnitude > (std::uint64_t(1) << 40)) fail("integer '" + std::string(token) + "' is out of range");
+    magnitude = magnitude * 10 + digit;
+  }
+  const std::int64_t value =
+      negative ? -static_cast<std::int64_t>(magnitude) : static_cast<std::int64_t>(magnitude);
+  const auto [lo, hi] = integer_range(type);
+  if (value < lo || value > hi)
+    fail("'" + std::string(token) + "' is out of range for " + ply_type_name(type));
+  return value;
+}
+
+double PlyStream::ascii_number(PlyType type) {
+  if (ply_type_is_integer(type)) return static_cast<double>(ascii_integer(type));
+  skip_ascii_spaces();
+  const char* begin = cursor_;
+  if (begin < lines_end_ && *begin == '+') ++begin;  // from_chars rejects a leading '+', which strtod accepts
+  double value = 0;
+  fast_float::from_chars_result result;
+  if (type == PlyType::float32) {
+    // Parse straight to float: correctly rounded, so shortest-form floats round-trip exactly.
+    float narrow = 0;
+    result = fast_float::from_chars(begin, lines_end_, narrow);
+    value = narrow;
+  } else {
+    result = fast_float::from_chars(begin, lines_end_, value);
+  }
+  if (result.ec != std::errc() || (result.ptr < lines_end_ && !is_ascii_delimiter(*result.ptr))) {
+    const std::string_view token = ascii_token(type);  // fails itself when the line has ended
+    fail("'" + std::string(token) + "' is not a number");
+  }
+  cursor_ = result.ptr;
+  return value;
+}
+
+// ---- Values of either encoding
+// ------------------------------------------------------------------------------
+
+double PlyStream::read_number(PlyType type) {
+  if (ascii_) return ascii_number(type);
+  const std::size_t size = ply_type_size(type);
+  const char* p = need(size);
+  const double value = swap_ ? load_number<true>(p, type) : load_number<false>(p, type);
+  reader_.consume(size);
+  return value;
+}
+
+std::int64_t PlyStream::read_integer(PlyType type, const char* what) {
+  if (ascii_ && ply_type_is_integer(type)) return ascii_integer(type);
+  const std::uint64_t offset = byte_position();
+  const double value = read_number(type);
+  const auto integer = exact_integer(value);
+  if (!integer) {
+    const std::string reason = std::string(what) + " " + std::to_string(value) + " is not an integer";
+    if (ascii_) fail(reason);
+    fail_at_byte(offset, reason);
+  }
+  return *integer;
+}
+
+std::uint64_t PlyStream::read_list_count(const PlyProperty& property) {
+  const std::uint64_t offset = byte_position();
+  const std::int64_t count = read_integer(property.count_type, "list count");
+  if (count < 0) {
+    const std::string reason = "negative list count " + std::to_string(count) + " in " + where();
+    if (ascii_) fail(reason);
+    fail_at_byte(offset, reason);
+  }
+  return static_cast<std::uint64_t>(count);
+}
+
+void PlyStream::skip_property(const PlyProperty& property) {
+  if (!property.is_list) {
+    if (ascii_) {
+      ascii_number(property.type);
+    } else {
+      skip_bytes(ply_type_size(property.type));
+    }
+    return;
+  }
+  const std::uint64_t count = read_list_count(property);
+  if (ascii_) {
+    for (std::uint64_t i = 0; i < count; ++i) ascii_number(property.type);
+  } else {
+    // count < 2^32 and items are at most 8 bytes: no overflow.
+    skip_bytes(count * ply_type_size(property.type));
+  }
+}
+
+void PlyStream::begin_record() {
+  if (ascii_ && !begin_ascii_record()) fail_truncated();
+}
+
+void PlyStream::end_record() {
+  if (ascii_) end_ascii_record();
+  ++current_record_;
+}
+
+// ---- Elements ---------------------------------------------------------------------------------------------
+
+void PlyStream::skip_element(std::size_t index) {
+  const PlyElement& element = header_.elements[index];
+  current_element_ = index;
+  current_record_ = 0;
+  if (element.properties.empty()) return;  // records of nothing take no room in either encoding
+  if (!ascii_ && !element.has_lists()) {
+    const std::size_t size = element.min_binary_size();
+    if (element.count > (reader_.file_size() - reader_.offset()) / size) {
+      current_record_ = (reader_.file_size() - reader_.offset()) / size;
+      fail_truncated();
+    }
+    skip_bytes(element.count * size);
+    current_record_ = element.count;
+    return;
+  }
+  for (; current_record_ < element.count;) {
+    begin_record();
+    for (const PlyProperty& property : element.properties) skip_property(property);
+    end_record();
+    if ((current_record_ & 0xfff) == 0) report_progress();
+  }
+}
+
+void PlyStream::load_vertices() {
+  const PlyElement& element = header_.elements[vertex_element_];
+  current_element_ = vertex_element_;
+  current_record_ = 0;
+  // Never trust the count for allocation before the data has proved itself: with fixed-size binary records
+  // the file size settles it, otherwise reserve what the remaining bytes could hold at the least and grow.
+  const std::uint64_t remaining = reader_.file_size() - byte_position();
+  std::uint64_t min_record = ascii_ ? 2 * element.properties.size() : element.min_binary_size();
+  const bool fixed = !ascii_ && !element.has_lists();
+  if (fixed && vertex_count_ > remaining / min_record) {
+    current_record_ = remaining / min_record;
+    fail_truncated();
+  }
+  const std::size_t reserve = static_cast<std::size_t>(std::min(vertex_count_, remaining / min_record));
+  vertices_.positions.reserve(reserve);
+  if (vertex_plan_.normals) vertices_.normals.reserve(reserve);
+  if (vertex_plan_.colors) vertices_.colors.reserve(reserve);
+  if (vertex_plan_.uvs) vertices_.uvs.reserve(reserve);
+  advise_huge_pages(vertices_.positions);
+  advise_huge_pages(vertices_.normals);
+  advise_huge_pages(vertices_.colors);
+  advise_huge_pages(vertices_.uvs);
+
+  if (fixed) {
+    std::vector<std::size_t> offsets;
+    std::size_t offset = 0;
+    for (const PlyProperty& property : element.properties) {
+      offsets.push_back(offset);
+      offset += ply_type_size(property.type);
+    }
+    offsets.push_back(offset);  // the record size
+    if (swap_) {
+      load_fixed_vertices<true>(offsets);
+    } else {
+      load_fixed_vertices<false>(offsets);
+    }
+  } else {
+    load_vertex_records();
+  }
+  report_progress();
+}
+
+void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset) {
+  const Vec3f position(values.position[0], values.position[1], values.position[2]);
+  if (!position.allFinite()) {
+    const std::string reason =
+        "vertex " + std::to_string(index) + " has a coordinate that is not a finite float";
+    if (ascii_) fail(reason);
+    fail_at_byte(offset, reason);
+  }
+  vertices_.positions.push_back(position);
+  bounds_.add(position);
+  if (vertex_plan_.normals)
+    vertices_.normals.emplace_back(values.normal[0], values.normal[1], values.normal[2]);
+  if (vertex_plan_.colors) vertices_.colors.push_back(values.color);
+  if (vertex_plan_.uvs) vertices_.uvs.emplace_back(values.uv[0], values.uv[1]);
+}
+
+template <bool Swap>
+void PlyStream::load_fixed_vertices(const std::vector<std::size_t>& offsets) {
+  const PlyElement& element = header_.elements[vertex_element_];
+  const std::size_t record = offsets.back();
+  struct Field {
+    std::size_t offset;
+    PlyType type;
+    Slot slot;
+  };
+  std::vector<Field> fields;
+  for (std::size_t i = 0; i < element.properties.size(); ++i) {
+    if (vertex_plan_.slots[i] != Slot::none)
+      fields.push_back({offsets[i], element.properties[i].type, vertex_plan_.slots[i]});
+  }
+  // Exactly float x y z: the records are the positions' memory layout.
+  const bool bulk =
+      !Swap && record == 12 && fields.size() == 3 && fields[0].slot == Slot::x && fields[1].slot == Slot::y &&
+      fields[2].slot == Slot::z && element.properties[0].type == PlyType::float32 &&
+      element.properties[1].type == PlyType::float32 && element.properties[2].type == PlyType::float32;
+  static_assert(sizeof(Vec3f) == 12);
+  if (bulk) vertices_.positions.resize(vertex_count_);
+
+  std::uint64_t done = 0;
+  Vec3f lo = Vec3f::Constant(std::numeric_limits<float>::infinity()), hi = -lo;
+  while (done < vertex_count_) {
+    const std::uint64_t left = vertex_count_ - done;
+    std::size_t available = reader_.available();
+    if (available < record)
+      available = reader_.fill(std::min<std::uint64_t>(reader_.capacity(), left * record));
+    const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, available / record));
+    if (n == 0) fail_truncated();  // cannot happen after the size check, unless the file shrank
+    const char* data = reader_.data();
+    const std::uint64_t base = reader_.offset();
+    if (bulk) {
+      float* out = vertices_.positions[done].data();
+      std::memcpy(out, data, n * record);
+      const std::size_t bad = scan_points(out, n, lo.data(), hi.data());
+      if (bad < n) {
+        current_record_ = done + bad;
+        fail_at_byte(base + bad * record,
+                     "vertex " + std::to_string(done + bad) + " has a coordinate that is not a finite float");
+      }
+    } else {
+      VertexValues values;
+      for (std::size_t i = 0; i < n; ++i) {
+        const char* p = data + i * record;
+        for (const Field& field : fields) {
+          set_value(values, field.slot, field.type, load_number<Swap>(p + field.offset, field.type));
+        }
+        add_vertex(done + i, values, base + i * record);
+      }
+    }
+    reader_.consume(n * record);
+    done += n;
+    current_record_ = done;
+    report_progress();
+  }
+  if (bulk && vertex_count_ > 0) {
+    bounds_.add(lo);
+    bounds_.add(hi);
+  }
+}
+
+void PlyStream::load_vertex_records() {
+  const PlyElement& element = header_.elements[vertex_element_];
+  VertexValues values;
+  while (current_record_ < vertex_count_) {
+    begin_record();
+    const std::uint64_t offset = byte_position();
+    for (std::size_t i = 0; i < element.properties.size(); ++i) {
+      const PlyProperty& property = element.properties[i];
+      if (property.is_list || vertex_plan_.slots[i] == Slot::none) {
+        skip_property(property);
+      } else {
+        set_value(values, vertex_plan_.slots[i], property.type, read_number(property.type));
+      }
+    }
+    add_vertex(static_cast<std::size_t>(current_record_), values, offset);
+    end_record();
+    if ((current_record_ & 0xfff) == 0) report_progress();
+  }
+}
+
+void PlyStream::check_end_of_data() {
+  if (ascii_) {
+    if (begin_ascii_record()) fail("unexpected data after the last element");
+    return;
+  }
+  if (!reader_.at_end()) {
+    fail_at_byte(reader_.offset(), std::to_string(reader_.file_size() - reader_.offset()) +
+                                       " bytes of unexpected data after the last element");
+  }
+}
+
+// ---- Faces ------------------------------------------------------------------------------------------------
+
+bool PlyStream::next(TriangleBatch& batch) {
+  batch.corners.clear();
+  if (faces_done_) {
+    batch.triangles.clear();
+    return false;
+  }
+  // Filled through a pointer, then cut to size: push_back's bookkeeping cost as much as decoding a
+  // triangle. A caller that reuses its batch keeps the full size between calls, so this resize is free.
+  batch.triangles.resize(capacity_);
+  out_ = batch.triangles.data();
+  filled_ = 0;
+  const std::uint64_t count = header_.elements[face_element_].count;
+  while (filled_ < capacity_) {
+    if (!in_record_ && current_record_ == count) {
+      finish_faces();
+      break;
+    }
+    if (!in_record_ && fast_faces_ && read_fast_faces()) continue;
+    read_face_values();
+  }
+  batch.triangles.resize(filled_);
+  out_ = nullptr;
+  report_progress();
+  return filled_ > 0;
+}
+
+void PlyStream::finish_faces() {
+  if (strips_ && triangles_emitted_ == 0) {
+    throw Error(path(), FilePosition::line(header_.elements[face_element_].header_line),
+                "the triangle strips hold no triangle");
+  }
+  if (!faces_first_) {
+    for (std::size_t element = face_element_ + 1; element < header_.elements.size(); ++element) {
+      skip_element(element);
+    }
+    check_end_of_data();
+  }
+  current_element_ = face_element_;
+  faces_done_ = true;
+  report_progress(true);
+}
+
+void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
+  if (strips_ && index == -1) {
+    corners_seen_ = 0;  // a new strip starts
+    return;
+  }
+  if (index < 0 || static_cast<std::uint64_t>(index) >= vertex_count_) {
+    const std::string reason = "vertex index " + std::to_string(index) + " is out of range (" +
+                               std::to_string(vertex_count_) + " vertices) in " + where();
+    if (ascii_) fail(reason);
+    fail_at_byte(offset, reason);
+  }
+  if (strips_) {
+    if (corners_seen_ >= 2) {
+      // Every other triangle of a strip is wound the other way; skip the degenerate ones that join strips.
+      const Index a = static_cast<Index>(strip_before_), b = static_cast<Index>(previous_corner_),
+                  c = static_cast<Index>(index);
+      if (a != b && b != c && a != c) {
+        out_[filled_++] = corners_seen_ % 2 == 0 ? Triangle{a, b, c} : Triangle{b, a, c};
+        ++triangles_emitted_;
+      }
+    }
+    strip_before_ = previous_corner_;
+  } else if (corners_seen_ == 0) {
+    first_corner_ = index;
+  } else if (corners_seen_ >= 2) {
+    out_[filled_++] = {static_cast<Index>(first_corner_), static_cast<Index>(previous_corner_),
+                       static_cast<Index>(index)};
+    ++triangles_emitted_;
+  }
+  previous_corner_ = index;
+  ++corners_seen_;
+}
+
+// The general path: one value at a time, any types, any other properties around the index list. Returns at
+// the end of the record or when the batch is full (each corner adds at most one triangle).
+void PlyStream::read_face_values() {
+  const PlyElement& element = header_.elements[face_element_];
+  if (!in_record_) {
+    begin_record();
+    in_record_ = true;
+    next_property_ = 0;
+    in_list_ = false;
+  }
+  while (true) {
+    if (in_list_) {
+      const PlyType type = element.properties[index_property_].type;
+      while (list_left_ > 0) {
+        if (filled_ >= capacity_) return;
+        const std::uint64_t offset = byte_position();
+        add_corner(read_integer(type, "vertex index"), offset);
+        --list_left_;
+      }
+      in_list_ = false;
+      ++next_property_;
+    }
+    if (next_property_ == element.properties.size()) break;
+    const PlyProperty& property = element.properties[next_property_];
+    if (next_property_ != index_property_) {
+      skip_property(property);
+      ++next_property_;
+      continue;
+    }
+    const std::uint64_t offset = byte_position();
+    list_left_ = read_list_count(property);
+    if (!strips_ && list_left_ < 3) {
+      const std::string reason = "a face with " + std::to_string(list_left_) + " corners in " + where();
+      if (ascii_) fail(reason);
+      fail_at_byte(offset, reason);
+    }
+    in_list_ = true;
+    corners_seen_ = 0;
+  }
+  end_record();
+  in_record_ = false;
+  if ((current_record_ & 0xfff) == 0) report_progress();
+}
+
+// Records of a count followed by the indices, nothing else, while the count is 3.
+template <class CountT, class IndexT, bool Swap>
+void PlyStream::read_triangle_records() {
+  constexpr std::size_t kRecord = sizeof(CountT) + 3 * sizeof(IndexT);
+  const std::uint64_t count = header_.elements[face_element_].count;
+  const std::uint64_t vertex_count = vertex_count_;
+  while (filled_ < capacity_ && current_record_ < count) {
+    std::size_t available = reader_.available();
+    if (available < kRecord) {
+      available = reader_.fill(reader_.capacity());
+      if (available < kRecord) return;  // the general path reports the truncation
+    }
+    const char* const begin = reader_.data();
+    const char* p = begin;
+    const auto fit = static_cast<std::size_t>(
+        std::min<std::uint64_t>({available / kRecord, capacity_ - filled_, count - current_record_}));
+    Triangle* const out = out_ + filled_;
+    std::size_t done = 0;
+    bool other_count = false;
+    for (; done < fit; ++done, p += kRecord) {
+      if (load<CountT, Swap>(p) != 3) {
+        other_count = true;
+        break;
+      }
+      const IndexT a = load<IndexT, Swap>(p + sizeof(CountT));
+      const IndexT b = load<IndexT, Swap>(p + sizeof(CountT) + sizeof(IndexT));
+      const IndexT c = load<IndexT, Swap>(p + sizeof(CountT) + 2 * sizeof(IndexT));
+      const Triangle t = {static_cast<Index>(a), static_cast<Index>(b), static_cast<Index>(c)};
+      bool bad = std::max({t[0], t[1], t[2]}) >= vertex_count;
+      if constexpr (std::is_signed_v<IndexT>) bad |= (a | b | c) < 0;
+      if (bad) [[unlikely]] {
+        const std::uint64_t record_offset = reader_.offset() + static_cast<std::uint64_t>(p - begin);
+        current_record_ += done;
+        const IndexT corners[3] = {a, b, c};
+        for (int k = 0; k < 3; ++k) {
+          if (corners[k] < 0 || static_cast<std::uint64_t>(corners[k]) >= vertex_count) {
+            fail_at_byte(record_offset + sizeof(CountT) + k * sizeof(IndexT),
+                         "vertex index " + std::to_string(corners[k]) + " is out of range (" +
+                             std::to_string(vertex_count) + " vertices) in " + where());
+          }
+        }
+      }
+      out[done] = t;
+    }
+    reader_.consume(done * kRecord);
+    filled_ += done;
+    current_record_ += done;
+    triangles_emitted_ += done;
+    if (other_count) return;
+  }
+}
+
+// Ascii lines of "3 a b c", while they are triangles.
+void PlyStream::read_ascii_triangles() {
+  const PlyProperty& list = header_.elements[face_element_].properties[index_property_];
+  const std::uint64_t count = header_.elements[face_element_].count;
+  while (filled_ < capacity_ && current_record_ < count) {
+    if (!begin_ascii_record()) return;  // the general path reports the truncation
+    const char* const start = cursor_;
+    if (ascii_integer(list.count_type) != 3) {
+      cursor_ = start;  // the general path reads this record from its start
+      return;
+    }
+    Triangle t;
+    for (Index& corner : t) {
+      const std::int64_t index = ascii_integer(list.type);
+      if (index < 0 || static_cast<std::uint64_t>(index) >= vertex_count_) {
+        fail("vertex index " + std::to_string(index) + " is out of range (" + std::to_string(vertex_count_) +
+             " vertices) in " + where());
+      }
+      corner = static_cast<Index>(index);
+    }
+    end_ascii_record();
+    out_[filled_++] = t;
+    ++current_record_;
+    ++triangles_emitted_;
+  }
+}
+
+// Dispatches the fast path on the count and index types; returns false when the next record needs the
+// general path (a polygon, the end of the data) and nothing was read.
+bool PlyStream::read_fast_faces() {
+  const PlyProperty& list = header_.elements[face_element_].properties[index_property_];
+  const std::uint64_t before = current_record_;
+  if (ascii_) {
+    read_ascii_triangles();
+    return current_record_ != before;
+  }
+  auto run = [&](auto count_tag, auto index_tag) {
+    using CountT = decltype(count_tag);
+    using IndexT = decltype(index_tag);
+    if (swap_) {
+      read_triangle_records<CountT, IndexT, true>();
+    } else {
+      read_triangle_records<CountT, IndexT, false>();
+    }
+  };
+  auto with_index = [&](auto count_tag) {
+    if (list.type == PlyType::int32) {
+      run(count_tag, std::int32_t{});
+    } else {
+      run(count_tag, std::uint32_t{});
+    }
+  };
+  switch (list.count_type) {
+    case PlyType::int8:
+      with_index(std::int8_t{});
+      break;
+    case PlyType::uint8:
+      with_index(std::uint8_t{});
+      break;
+    case PlyType::int16:
+      with_index(std::int16_t{});
+      break;
+    case PlyType::uint16:
+      with_index(std::uint16_t{});
+      break;
+    case PlyType::int32:
+      with_index(std::int32_t{});
+      break;
+    case PlyType::uint32:
+      with_index(std::uint32_t{});
+      break;
+    case PlyType::float32:
+    case PlyType::float64:
+      return false;
+  }
+  return current_record_ != before;
+}
+
+}  // namespace
+
+std::unique_ptr<TriangleStream> open_ply_stream(const std::string& path, const ReadOptions& options) {
+  return std::make_unique<PlyStream>(path, options);
+}
+
+}  // namespace ocsimp::detail

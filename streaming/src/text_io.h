@@ -1,0 +1,161 @@
+// Helpers shared by the text formats (OBJ, ASCII STL): whole lines over a ByteReader, whitespace-separated
+// tokens, strict number parsing, shortest round-trip float printing, and the checks every writer makes.
+#pragma once
+
+#include <fast_float/fast_float.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <string_view>
+
+#include "byte_reader.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/core/mesh.h"
+
+namespace ocsimp::detail {
+
+// Splits the input into lines ("\n" or "\r\n"; a final line without terminator counts). A line must fit in
+// the reader's buffer: longer ones are an error rather than a reason to grow memory.
+class LineReader {
+ public:
+  explicit LineReader(ByteReader& reader) : reader_(reader) {}
+
+  // The next line without its terminator; false at the end of the input. The view stays valid until the
+  // next call.
+  bool next(std::string_view& line) {
+    std::size_t available = reader_.available();
+    if (available == 0 && (available = reader_.fill(1)) == 0) return false;
+    const char* data = reader_.data();
+    const char* newline = static_cast<const char*>(std::memchr(data, '\n', available));
+    if (newline == nullptr) {
+      available = reader_.fill(reader_.capacity());
+      data = reader_.data();
+      newline = static_cast<const char*>(std::memchr(data, '\n', available));
+      if (newline == nullptr && available == reader_.capacity()) {
+        throw Error(reader_.path(), FilePosition::line(line_ + 1),
+                    "line longer than " + std::to_string(reader_.capacity()) + " bytes");
+      }
+    }
+    std::size_t length = newline ? static_cast<std::size_t>(newline - data) : available;
+    reader_.consume(newline ? length + 1 : length);
+    ++line_;
+    if (length > 0 && data[length - 1] == '\r') --length;
+    line = std::string_view(data, length);
+    return true;
+  }
+
+  // 1-based number of the line last returned by next().
+  std::uint64_t line_number() const { return line_; }
+
+  // Continues from byte `offset`, the start of line `line` (1-based), as a previous pass recorded them.
+  void restart_at(std::uint64_t offset, std::uint64_t line) {
+    reader_.seek(offset);
+    line_ = line - 1;
+  }
+
+ private:
+  ByteReader& reader_;
+  std::uint64_t line_ = 0;
+};
+
+inline bool is_blank(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
+
+inline const char* skip_blanks(const char* p, const char* end) {
+  while (p < end && is_blank(*p)) ++p;
+  return p;
+}
+
+inline const char* token_end(const char* p, const char* end) {
+  while (p < end && !is_blank(*p)) ++p;
+  return p;
+}
+
+// The token at p (after blanks), for error messages, cut short when long.
+inline std::string quote_token(const char* p, const char* end) {
+  p = skip_blanks(p, end);
+  const char* e = token_end(p, end);
+  if (p == e) return "end of line";
+  std::string token(p, static_cast<std::size_t>(std::min<std::ptrdiff_t>(e - p, 40)));
+  for (char& c : token)
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) >= 0x7f) c = '?';
+  return "'" + token + (e - p > 40 ? "...'" : "'");
+}
+
+enum class NumberStatus { ok, missing, malformed, not_finite };
+
+// Parses one finite float token starting at p (after blanks); on success advances p past it. The token must
+// end at a blank or at `end`: "1.5x" is malformed, not 1.5. Decimal text is rounded once, straight to float.
+inline NumberStatus parse_float(const char*& p, const char* end, float& value) {
+  const char* start = skip_blanks(p, end);
+  if (start == end) return NumberStatus::missing;
+  const char* digits = (*start == '+' && start + 1 < end && start[1] != '-') ? start + 1 : start;
+  const auto result = fast_float::from_chars(digits, end, value);
+  if (result.ec != std::errc() || (result.ptr < end && !is_blank(*result.ptr)))
+    return NumberStatus::malformed;
+  if (!std::isfinite(value)) return NumberStatus::not_finite;
+  p = result.ptr;
+  return NumberStatus::ok;
+}
+
+inline std::string describe(NumberStatus status, const char* p, const char* end) {
+  switch (status) {
+    case NumberStatus::missing:
+      return "missing number";
+    case NumberStatus::malformed:
+      return "not a number: " + quote_token(p, end);
+    case NumberStatus::not_finite:
+      return "NaN or infinite number: " + quote_token(p, end);
+    case NumberStatus::ok:
+      break;
+  }
+  return "ok";
+}
+
+// Appends the shortest decimal text that reads back as exactly `value`. `out` needs 16 free bytes.
+inline char* print_float(char* out, float value) {
+  if (value == 0.0f) value = 0.0f;  // no "-0"
+  return std::to_chars(out, out + 16, value).ptr;
+}
+
+// Writers refuse meshes they would write wrongly: faces pointing past the vertices, attribute arrays of the
+// wrong length, coordinates that no reader would take back.
+inline void check_writable(const std::string& path, const IndexedMesh& mesh) {
+  const std::size_t n = mesh.positions.size();
+  auto check_size = [&](std::size_t size, const char* what) {
+    if (size != 0 && size != n) {
+      throw Error(path, {},
+                  std::string("cannot write: ") + what + " has " + std::to_string(size) + " entries for " +
+                      std::to_string(n) + " vertices");
+    }
+  };
+  check_size(mesh.normals.size(), "the normal array");
+  check_size(mesh.colors.size(), "the color array");
+  check_size(mesh.uvs.size(), "the uv array");
+  auto check_finite = [&](const auto& values, const char* what) {
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      if (!values[i].allFinite()) {
+        throw Error(path, {}, "cannot write: vertex " + std::to_string(i) + " has a NaN or infinite " + what);
+      }
+    }
+  };
+  check_finite(mesh.positions, "coordinate");
+  check_finite(mesh.normals, "normal");
+  check_finite(mesh.uvs, "uv");
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+    for (Index v : mesh.triangles[f]) {
+      if (v >= n) {
+        throw Error(path, {},
+                    "cannot write: face " + std::to_string(f) + " uses vertex " + std::to_string(v) +
+                        " of only " + std::to_string(n));
+      }
+    }
+  }
+}
+
+}  // namespace ocsimp::detail

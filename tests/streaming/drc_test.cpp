@@ -1,0 +1,164 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "io_test_util.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+using test::TempDir;
+
+// Quantizing to `bits` over the largest extent moves a point by at most half a step per axis, which is well
+// inside diagonal / 2^(bits-1).
+double quantization_bound(const IndexedMesh& mesh, int bits) {
+  return mesh.bounds().diagonal() / std::ldexp(1.0, bits - 1);
+}
+
+TEST(Drc, RoundTripKeepsAttributesWithinQuantization) {
+  TempDir dir;
+  const IndexedMesh mesh = test::attributed_sphere(3);
+  write_mesh(dir / "s.drc", mesh);
+  const IndexedMesh back = read_mesh(dir / "s.drc");
+  ASSERT_EQ(back.vertex_count(), mesh.vertex_count());
+  ASSERT_EQ(back.face_count(), mesh.face_count());
+  ASSERT_TRUE(back.has_normals() && back.has_uvs() && back.has_colors());
+  const std::vector<Index> map = test::match_vertices(mesh, back, quantization_bound(mesh, 16));
+  test::expect_same_faces(mesh, back, map);
+  for (std::size_t i = 0; i < back.vertex_count(); ++i) {
+    const Index j = map[i];
+    EXPECT_GT(back.normals[i].normalized().dot(mesh.normals[j]), 0.9999f) << i;  // 12-bit octahedral normals
+    EXPECT_LT((back.uvs[i] - mesh.uvs[j]).cwiseAbs().maxCoeff(), 1e-4f) << i;    // 16 bits over a unit range
+    EXPECT_EQ(back.colors[i], mesh.colors[j]) << i;                              // bytes stay bytes
+  }
+}
+
+TEST(Drc, FewerPositionBitsGiveLargerErrorsAndSmallerFiles) {
+  TempDir dir;
+  const IndexedMesh mesh = test::sphere(4, 10.0f);
+  double previous_error = 0;
+  std::uintmax_t previous_size = 0;
+  for (int bits : {20, 14, 10, 7}) {
+    WriteOptions options;
+    options.draco_position_bits = bits;
+    const std::string path = dir / ("s" + std::to_string(bits) + ".drc");
+    write_mesh(path, mesh, options);
+    const IndexedMesh back = read_mesh(path);
+    ASSERT_EQ(back.vertex_count(), mesh.vertex_count()) << bits;
+    double error = 0;
+    const std::vector<Index> map = test::match_vertices(mesh, back, quantization_bound(mesh, bits), &error);
+    test::expect_same_faces(mesh, back, map);
+    const std::uintmax_t size = std::filesystem::file_size(path);
+    if (previous_size != 0) {
+      EXPECT_GT(error, previous_error) << bits;
+      EXPECT_LT(size, previous_size) << bits;
+    }
+    previous_error = error;
+    previous_size = size;
+  }
+}
+
+TEST(Drc, EveryCompressionLevelRoundTrips) {
+  TempDir dir;
+  const IndexedMesh mesh = test::attributed_sphere(2);
+  for (int level : {0, 3, 7, 10}) {
+    WriteOptions options;
+    options.draco_compression_level = level;
+    write_mesh(dir / "s.drc", mesh, options);
+    const IndexedMesh back = read_mesh(dir / "s.drc");
+    ASSERT_EQ(back.vertex_count(), mesh.vertex_count()) << level;
+    test::expect_same_faces(mesh, back, test::match_vertices(mesh, back, quantization_bound(mesh, 16)));
+  }
+}
+
+TEST(Drc, PositionsOnly) {
+  TempDir dir;
+  const IndexedMesh mesh = test::cube(3);
+  write_mesh(dir / "c.drc", mesh);
+  const IndexedMesh back = read_mesh(dir / "c.drc");
+  EXPECT_FALSE(back.has_normals() || back.has_uvs() || back.has_colors());
+  test::expect_same_faces(mesh, back, test::match_vertices(mesh, back, quantization_bound(mesh, 16)));
+  EXPECT_EQ(analyze_topology(back).boundary_edges, 0u);
+}
+
+TEST(Drc, StreamServesTheDecodedFacesInBatches) {
+  TempDir dir;
+  const IndexedMesh mesh = test::sphere(3);
+  write_mesh(dir / "s.drc", mesh);
+  ReadOptions options;
+  options.batch_capacity = 100;
+  auto stream = open_triangle_stream(dir / "s.drc", options);
+  ASSERT_TRUE(stream->indexed());
+  EXPECT_EQ(stream->vertices().vertex_count(), mesh.vertex_count());
+  EXPECT_EQ(stream->triangles_hint(), mesh.face_count());
+  const Box3 box = stream->bounds();
+  EXPECT_LT((box.lo - mesh.bounds().lo).norm(), quantization_bound(mesh, 16));
+  EXPECT_LT((box.hi - mesh.bounds().hi).norm(), quantization_bound(mesh, 16));
+  TriangleBatch batch;
+  std::size_t total = 0;
+  while (stream->next(batch)) {
+    EXPECT_LE(batch.size(), 100u);
+    for (const Triangle& t : batch.triangles)
+      for (Index v : t) EXPECT_LT(v, mesh.vertex_count());
+    total += batch.size();
+  }
+  EXPECT_EQ(total, mesh.face_count());
+  EXPECT_EQ(stream->bytes_read(), stream->bytes_total());
+}
+
+TEST(Drc, RejectsBadOptionsWithoutWriting) {
+  TempDir dir;
+  const IndexedMesh mesh = test::cube(1);
+  for (auto [bits, level] : {std::pair{0, 7}, {31, 7}, {16, -1}, {16, 11}}) {
+    WriteOptions options;
+    options.draco_position_bits = bits;
+    options.draco_compression_level = level;
+    EXPECT_THROW(write_mesh(dir / "c.drc", mesh, options), Error) << bits << " " << level;
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path));
+}
+
+TEST(Drc, TruncatedFileIsAnError) {
+  TempDir dir;
+  write_mesh(dir / "s.drc", test::sphere(3));
+  const std::string bytes = test::read_file_bytes(dir / "s.drc");
+  for (std::size_t keep : {bytes.size() / 2, bytes.size() - 1, std::size_t(12)}) {
+    test::write_file_bytes(dir / "t.drc", bytes.substr(0, keep));
+    try {
+      read_mesh(dir / "t.drc");
+      ADD_FAILURE() << "a file cut to " << keep << " bytes was read";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.file(), dir / "t.drc");
+      EXPECT_EQ(e.position().kind, FilePosition::Kind::byte) << e.what();
+      EXPECT_LE(e.position().value, keep) << e.what();
+      EXPECT_FALSE(e.reason().empty());
+    }
+  }
+}
+
+// One case per file of tests/data/malformed/drc.
+const std::vector<test::MalformedCase> kMalformed = {
+    {"point_cloud.drc", FilePosition::Kind::byte, 7, "point cloud"},
+    {"header_only.drc", FilePosition::Kind::byte, 5, "Draco header cut short (5 of 11 bytes)"},
+    {"bad_version.drc", FilePosition::Kind::byte, 5, "Draco version 99.1 is newer"},
+    {"unknown_method.drc", FilePosition::Kind::byte, 8, "unknown Draco mesh encoding method 7"},
+    {"truncated.drc", FilePosition::Kind::byte, 29, "Draco: Failed to decode"},
+};
+
+class DrcMalformed : public ::testing::TestWithParam<test::MalformedCase> {};
+TEST_P(DrcMalformed, NamesFilePlaceAndReason) {
+  test::expect_malformed("drc", GetParam());
+}
+INSTANTIATE_TEST_SUITE_P(Corpus, DrcMalformed, ::testing::ValuesIn(kMalformed), test::case_name);
+TEST(DrcMalformedCorpus, EveryFileHasACase) {
+  test::expect_all_covered("drc", kMalformed);
+}
+
+}  // namespace
+}  // namespace ocsimp

@@ -1,0 +1,330 @@
+#include <gtest/gtest.h>
+
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "io_test_util.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+using test::TempDir;
+
+IndexedMesh read_text(const TempDir& dir, const std::string& text, const std::string& name = "m.obj") {
+  test::write_file_bytes(dir / name, text);
+  return read_mesh(dir / name);
+}
+
+TEST(Obj, RoundTripKeepsEveryAttributeExactly) {
+  TempDir dir;
+  const IndexedMesh mesh = test::attributed_sphere(3);
+  write_mesh(dir / "s.obj", mesh);
+  const IndexedMesh back = read_mesh(dir / "s.obj");
+  ASSERT_EQ(back.vertex_count(), mesh.vertex_count());
+  EXPECT_EQ(back.triangles, mesh.triangles);
+  EXPECT_EQ(back.positions, mesh.positions);  // shortest round-trip text reads back bit for bit
+  EXPECT_EQ(back.normals, mesh.normals);
+  EXPECT_EQ(back.uvs, mesh.uvs);
+  EXPECT_EQ(back.colors, mesh.colors);  // alpha is 255 in the source, and OBJ reads alpha as 255
+}
+
+TEST(Obj, RoundTripWithoutAttributesWritesPlainFaces) {
+  TempDir dir;
+  const IndexedMesh mesh = test::cube(3);
+  write_mesh(dir / "c.obj", mesh);
+  const std::string text = test::read_file_bytes(dir / "c.obj");
+  EXPECT_EQ(text.find('/'), std::string::npos);
+  EXPECT_EQ(text.find("vn"), std::string::npos);
+  const IndexedMesh back = read_mesh(dir / "c.obj");
+  EXPECT_EQ(back.positions, mesh.positions);
+  EXPECT_EQ(back.triangles, mesh.triangles);
+  EXPECT_FALSE(back.has_normals() || back.has_uvs() || back.has_colors());
+}
+
+TEST(Obj, EveryIndexForm) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir,
+                                  "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+                                  "vt 0.25 0.5\nvt 0.75 0.5 0\n"
+                                  "vn 0 0 1\nvn 0 1 0\n"
+                                  "f 1 2 3\n"
+                                  "f 1/1 3/2 4/1\n"
+                                  "f 5//1 6//2 7//1\n"
+                                  "f 5/2/2 7/1/1 8/2/2\n");
+  ASSERT_EQ(m.vertex_count(), 8u);
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 2, 3}, {4, 5, 6}, {4, 6, 7}}));
+  ASSERT_TRUE(m.has_uvs());
+  ASSERT_TRUE(m.has_normals());
+  // First corner referencing a position gives it its attributes; unreferenced ones stay zero.
+  EXPECT_EQ(m.uvs[0], Vec2f(0.25f, 0.5f));
+  EXPECT_EQ(m.uvs[2], Vec2f(0.75f, 0.5f));
+  EXPECT_EQ(m.uvs[3], Vec2f(0.25f, 0.5f));
+  EXPECT_EQ(m.uvs[1], Vec2f::Zero());
+  EXPECT_EQ(m.uvs[4], Vec2f(0.75f, 0.5f));
+  EXPECT_EQ(m.normals[4], Vec3f(0, 0, 1));
+  EXPECT_EQ(m.normals[5], Vec3f(0, 1, 0));
+  EXPECT_EQ(m.normals[7], Vec3f(0, 1, 0));
+  EXPECT_EQ(m.normals[0], Vec3f::Zero());
+}
+
+TEST(Obj, FirstCornerWinsOnSeams) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir,
+                                  "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.5\n"
+                                  "f 1/1 2/2 3/3\nf 1/4 3/4 2/4\n");
+  EXPECT_EQ(m.uvs, (std::vector<Vec2f>{{0, 0}, {1, 0}, {0, 1}}));
+}
+
+TEST(Obj, NegativeIndicesCountBackFromTheLine) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir,
+                                  "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf -3/-1 -2/-1 -1/-1\n"
+                                  "v 5 5 5\nvt 1 1\nf -4 -1 -2\n");
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 3, 2}}));
+  EXPECT_EQ(m.uvs[3], Vec2f::Zero());
+  EXPECT_EQ(m.uvs[0], Vec2f::Zero());
+}
+
+TEST(Obj, PolygonsAreFanTriangulated) {
+  TempDir dir;
+  const IndexedMesh m =
+      read_text(dir, "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 2 0\nv 0 1 0\nf 1 2 3 4 5\nf 1 2 3 4\n");
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 1, 2}, {0, 2, 3}}));
+}
+
+TEST(Obj, VerticesMayFollowTheFaces) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir, "f 1 2 3\nf 3 2 4\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n");
+  EXPECT_EQ(m.vertex_count(), 4u);
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {2, 1, 3}}));
+  EXPECT_EQ(m.positions[3], Vec3f(1, 1, 0));
+}
+
+TEST(Obj, IgnoresStatementsItDoesNotUse) {
+  TempDir dir;
+  const IndexedMesh m =
+      read_text(dir,
+                "# comment\r\nmtllib a.mtl\r\no thing\r\ng group one\r\ns 1\r\nusemtl red\r\n"
+                "v 0 0 0\r\nv 1 0 0 1.0\r\nv 0 1 0\r\n\r\n   \r\nvp 0.5\r\nl 1 2\r\np 1\r\n"
+                "curv 0 1 1 2\r\nfuture_statement whatever 1 2\r\n\tf\t1 2\t3 \r\n");
+  EXPECT_EQ(m.vertex_count(), 3u);
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}}));
+  EXPECT_EQ(m.positions[1], Vec3f(1, 0, 0));  // w ignored
+}
+
+TEST(Obj, LineContinuation) {
+  TempDir dir;
+  const IndexedMesh m =
+      read_text(dir, "# saved to C:\\models\\\nv 0 0 0\nv 1 \\\n 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 \\\n3 \\\n4\n");
+  EXPECT_EQ(m.vertex_count(), 4u);  // a comment's trailing '\' does not continue it
+  EXPECT_EQ(m.positions[1], Vec3f(1, 0, 0));
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 2, 3}}));
+}
+
+TEST(Obj, VertexColorsAndLenientNumbers) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir, "v 0 0 0\nv +1e0 0 0 1 0 0.5\nv 0 1. .0 1 0 0 1\nf 1 2 3\n");
+  ASSERT_TRUE(m.has_colors());
+  EXPECT_EQ(m.colors[0], (Color{255, 255, 255, 255}));  // before the first colored vertex: white
+  EXPECT_EQ(m.colors[1], (Color{255, 0, 128, 255}));
+  EXPECT_EQ(m.colors[2], (Color{0, 0, 255, 255}));  // x y z w r g b
+  EXPECT_EQ(m.positions[1], Vec3f(1, 0, 0));
+  EXPECT_EQ(m.positions[2], Vec3f(0, 1, 0));
+}
+
+TEST(Obj, StreamsBatchesOfBoundedSize) {
+  TempDir dir;
+  std::string text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv -1 0 -2\nv 0 3 0\n";
+  for (int i = 0; i < 10; ++i) text += "f 1 2 3 4 6\n";  // 3 triangles each
+  test::write_file_bytes(dir / "p.obj", text);
+  ReadOptions options;
+  options.batch_capacity = 4;
+  auto stream = open_triangle_stream(dir / "p.obj", options);
+  ASSERT_TRUE(stream->indexed());
+  EXPECT_EQ(stream->vertices().vertex_count(), 6u);
+  EXPECT_EQ(stream->triangles_hint(), 10u);
+  const Box3 box = stream->bounds();
+  EXPECT_EQ(box.lo, Vec3d(-1, 0, -2));
+  EXPECT_EQ(box.hi, Vec3d(1, 3, 0));
+  TriangleBatch batch;
+  std::size_t total = 0, batches = 0;
+  while (stream->next(batch)) {
+    EXPECT_LE(batch.size(), 4u);
+    EXPECT_TRUE(batch.corners.empty());
+    for (const Triangle& t : batch.triangles) EXPECT_EQ(t[0], 0u);
+    total += batch.size();
+    ++batches;
+  }
+  EXPECT_EQ(total, 30u);
+  EXPECT_EQ(batches, 8u);
+  EXPECT_EQ(stream->bytes_read(), stream->bytes_total());
+}
+
+TEST(Obj, ReportsTheLineOfAFaceError) {
+  TempDir dir;
+  test::write_file_bytes(dir / "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n# fine so far\nf 1 2 3\nf 1 2 4\n");
+  try {
+    read_mesh(dir / "bad.obj");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.position().kind, FilePosition::Kind::line);
+    EXPECT_EQ(e.position().value, 6u);
+    EXPECT_NE(e.reason().find("vertex index 4 out of range (the file has 3)"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Obj, RejectsALineLongerThanTheBuffer) {
+  TempDir dir;
+  std::string text = "v 0 0 0\nv 1 0 0\nv 0 1 0\n# ";
+  text.append(5u << 20, 'x');
+  text += "\nf 1 2 3\n";
+  test::write_file_bytes(dir / "long.obj", text);
+  try {
+    read_mesh(dir / "long.obj");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.position().value, 4u);
+    EXPECT_NE(e.reason().find("line longer than"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Obj, WriterRefusesBrokenMeshesAndLeavesNoFile) {
+  TempDir dir;
+  IndexedMesh mesh = test::cube(1);
+  mesh.triangles.push_back({0, 1, 99});
+  EXPECT_THROW(write_mesh(dir / "x.obj", mesh), Error);
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.obj"));
+  mesh = test::cube(1);
+  mesh.normals.resize(2);
+  EXPECT_THROW(write_mesh(dir / "x.obj", mesh), Error);
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path));
+}
+
+// Shared meshes: counts from the files' own v and f records; topology facts of the real models.
+TEST(ObjShared, StanfordBunnyMatchesThePly) {
+  OCSIMP_REQUIRE_SHARED_MESH(obj, "stanford-bunny.obj");
+  const IndexedMesh m = read_mesh(obj);
+  EXPECT_EQ(m.vertex_count(), 35947u);
+  EXPECT_EQ(m.face_count(), 69451u);
+  EXPECT_FALSE(m.has_normals() || m.has_uvs() || m.has_colors());
+  OCSIMP_REQUIRE_SHARED_MESH(ply, "bunny.ply");
+  IndexedMesh p;
+  try {
+    p = read_mesh(ply);
+  } catch (const Error& e) {
+    GTEST_SKIP() << "PLY reader not available yet: " << e.what();
+  }
+  EXPECT_EQ(p.face_count(), m.face_count());
+  EXPECT_EQ(p.vertex_count(), m.vertex_count());
+  const Box3 a = m.bounds(), b = p.bounds();
+  EXPECT_LT((a.lo - b.lo).norm(), 1e-5);
+  EXPECT_LT((a.hi - b.hi).norm(), 1e-5);
+}
+
+TEST(ObjShared, FandiskIsClosed) {
+  OCSIMP_REQUIRE_SHARED_MESH(path, "fandisk.obj");
+  const IndexedMesh m = read_mesh(path);
+  EXPECT_EQ(m.vertex_count(), 6475u);
+  EXPECT_EQ(m.face_count(), 12946u);
+  const MeshTopology t = analyze_topology(m);
+  EXPECT_EQ(t.boundary_edges, 0u);
+  EXPECT_EQ(t.non_manifold_edges, 0u);
+  EXPECT_EQ(t.components, 1u);
+}
+
+TEST(ObjShared, SpotTakesEachPositionsUvFromItsFirstCorner) {
+  OCSIMP_REQUIRE_SHARED_MESH(path, "spot.obj");
+  const IndexedMesh m = read_mesh(path);
+  EXPECT_EQ(m.vertex_count(), 2930u);
+  EXPECT_EQ(m.face_count(), 5856u);
+  ASSERT_TRUE(m.has_uvs());
+  EXPECT_FALSE(m.has_normals());
+  // The same rule by a plain independent reading: spot's faces are "f v/vt v/vt v/vt" triangles.
+  std::istringstream in(test::read_file_bytes(path));
+  std::vector<Vec2f> vt;
+  std::vector<std::pair<int, int>> corners;
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream words(line);
+    std::string keyword;
+    words >> keyword;
+    if (keyword == "vt") {
+      float u, v;
+      words >> u >> v;
+      vt.emplace_back(u, v);
+    } else if (keyword == "f") {
+      for (std::string corner; words >> corner;) {
+        const auto slash = corner.find('/');
+        corners.emplace_back(std::stoi(corner.substr(0, slash)) - 1, std::stoi(corner.substr(slash + 1)) - 1);
+      }
+    }
+  }
+  std::vector<bool> seen(m.vertex_count(), false);
+  std::size_t checked = 0;
+  for (auto [v, t] : corners) {
+    if (seen[v]) continue;
+    seen[v] = true;
+    ASSERT_EQ(m.uvs[v], vt[t]) << "vertex " << v;
+    ++checked;
+  }
+  EXPECT_EQ(checked, m.vertex_count());
+  const MeshTopology topology = analyze_topology(m);
+  EXPECT_EQ(topology.boundary_edges, 0u);  // uv seams split attributes, never positions
+  EXPECT_EQ(topology.unreferenced_vertices, 0u);
+}
+
+TEST(ObjShared, OtherModels) {
+  struct Model {
+    const char* name;
+    std::size_t vertices, faces;
+  };
+  for (const Model& model : {Model{"teapot.obj", 3644, 6320}, Model{"homer.obj", 6002, 12000},
+                             Model{"rocker-arm.obj", 10044, 20088}}) {
+    const std::string path = test::shared_mesh(model.name);
+    if (path.empty()) continue;
+    const IndexedMesh m = read_mesh(path);
+    EXPECT_EQ(m.vertex_count(), model.vertices) << model.name;
+    EXPECT_EQ(m.face_count(), model.faces) << model.name;
+    for (const Triangle& t : m.triangles)
+      for (Index v : t) ASSERT_LT(v, m.vertex_count());
+  }
+}
+
+// One case per file of tests/data/malformed/obj.
+const std::vector<test::MalformedCase> kMalformed = {
+    {"zero_index.obj", FilePosition::Kind::line, 5, "vertex index 0"},
+    {"index_out_of_range.obj", FilePosition::Kind::line, 4, "vertex index 7 out of range (the file has 3)"},
+    {"huge_index.obj", FilePosition::Kind::line, 4, "out of range"},
+    {"relative_before_first.obj", FilePosition::Kind::line, 4, "reaches before the first vertex"},
+    {"face_two_corners.obj", FilePosition::Kind::line, 5, "at least 3 corners (found 2)"},
+    {"face_no_corners.obj", FilePosition::Kind::line, 4, "at least 3 corners (found 0)"},
+    {"non_numeric_vertex.obj", FilePosition::Kind::line, 2, "not a number: 'abc'"},
+    {"number_with_suffix.obj", FilePosition::Kind::line, 3, "not a number: '0.5mm'"},
+    {"nan_vertex.obj", FilePosition::Kind::line, 3, "NaN or infinite"},
+    {"inf_normal.obj", FilePosition::Kind::line, 4, "NaN or infinite"},
+    {"overflow_vertex.obj", FilePosition::Kind::line, 1, "NaN or infinite"},
+    {"vertex_two_coords.obj", FilePosition::Kind::line, 2, "a vertex needs x y z"},
+    {"vertex_too_many_numbers.obj", FilePosition::Kind::line, 1, "too many numbers"},
+    {"normal_two_coords.obj", FilePosition::Kind::line, 4, "a normal needs x y z"},
+    {"texcoord_empty.obj", FilePosition::Kind::line, 4, "a texture coordinate needs u"},
+    {"malformed_corner.obj", FilePosition::Kind::line, 4, "malformed face corner '1/1/1/1'"},
+    {"corner_letters.obj", FilePosition::Kind::line, 4, "malformed face corner 'a'"},
+    {"texcoord_out_of_range.obj", FilePosition::Kind::line, 5, "texture coordinate index 2 out of range"},
+    {"normal_index_zero.obj", FilePosition::Kind::line, 5, "normal index 0"},
+    {"continued_error.obj", FilePosition::Kind::line, 4, "vertex index 9 out of range"},
+};
+
+class ObjMalformed : public ::testing::TestWithParam<test::MalformedCase> {};
+TEST_P(ObjMalformed, NamesFileLineAndReason) {
+  test::expect_malformed("obj", GetParam());
+}
+INSTANTIATE_TEST_SUITE_P(Corpus, ObjMalformed, ::testing::ValuesIn(kMalformed), test::case_name);
+TEST(ObjMalformedCorpus, EveryFileHasACase) {
+  test::expect_all_covered("obj", kMalformed);
+}
+
+}  // namespace
+}  // namespace ocsimp
