@@ -1,0 +1,740 @@
+#include "ocsimp/decimate/decimate.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <random>
+#include <set>
+
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+DecimateResult run(const IndexedMesh& mesh, DecimateOptions options) {
+  return decimate(QuadricMesh{mesh, {}}, options);
+}
+
+DecimateOptions faces(std::uint64_t n) {
+  DecimateOptions o;
+  o.target_faces = n;
+  return o;
+}
+
+Vec3d face_normal(const IndexedMesh& m, const Triangle& t) {
+  const Vec3d p0 = m.positions[t[0]].cast<double>();
+  return (m.positions[t[1]].cast<double>() - p0).cross(m.positions[t[2]].cast<double>() - p0);
+}
+
+long euler_characteristic(const IndexedMesh& m) {
+  const MeshTopology t = analyze_topology(m);
+  return static_cast<long>(m.vertex_count() - t.unreferenced_vertices) - static_cast<long>(t.edges) +
+         static_cast<long>(m.face_count());
+}
+
+// A closed torus (genus 1, Euler characteristic 0) of n x m quads, outward facing.
+IndexedMesh torus(int n, int m) {
+  IndexedMesh mesh;
+  const double pi = std::acos(-1.0);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < m; ++j) {
+      const double u = 2 * pi * i / n, v = 2 * pi * j / m;
+      mesh.positions.emplace_back(float((1 + 0.4 * std::cos(v)) * std::cos(u)),
+                                  float((1 + 0.4 * std::cos(v)) * std::sin(u)), float(0.4 * std::sin(v)));
+    }
+  }
+  auto id = [&](int i, int j) { return static_cast<Index>(((i + n) % n) * m + (j + m) % m); };
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < m; ++j) {
+      mesh.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      mesh.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  }
+  return mesh;
+}
+
+// The unit grid square with z = height(x, y).
+template <class Height>
+IndexedMesh height_field(int n, Height height) {
+  IndexedMesh mesh = test::grid_square(n);
+  for (Vec3f& p : mesh.positions) p.z() = static_cast<float>(height(p.x(), p.y()));
+  return mesh;
+}
+
+// Closest point on triangle (a, b, c) to p (Ericson, Real-Time Collision Detection, 5.1.5).
+Vec3d closest_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  const Vec3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return a;
+  const Vec3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+  const Vec3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = 1 / (va + vb + vc);
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+// Nearest face of `mesh` to a point, through a uniform grid of face bounding boxes.
+struct FaceGrid {
+  const IndexedMesh& mesh;
+  Box3 box;
+  double cell = 1;
+  int dims[3] = {1, 1, 1};
+  std::vector<std::vector<Index>> cells;
+
+  explicit FaceGrid(const IndexedMesh& m) : mesh(m) {
+    box = m.bounds();
+    const double volume = std::max(1e-30, box.extent().prod());
+    cell = std::max(std::cbrt(volume / double(m.face_count()) * 4), box.diagonal() * 1e-3);
+    for (int i = 0; i < 3; ++i) dims[i] = std::max(1, int(std::ceil(box.extent()[i] / cell)) + 1);
+    cells.resize(std::size_t(dims[0]) * dims[1] * dims[2]);
+    for (Index f = 0; f < m.face_count(); ++f) {
+      Box3 fb;
+      for (Index v : m.triangles[f]) fb.add(m.positions[v]);
+      const auto lo = coord(fb.lo), hi = coord(fb.hi);
+      for (int x = lo[0]; x <= hi[0]; ++x)
+        for (int y = lo[1]; y <= hi[1]; ++y)
+          for (int z = lo[2]; z <= hi[2]; ++z) cells[index(x, y, z)].push_back(f);
+    }
+  }
+  std::array<int, 3> coord(const Vec3d& p) const {
+    std::array<int, 3> c;
+    for (int i = 0; i < 3; ++i) c[i] = std::clamp(int((p[i] - box.lo[i]) / cell), 0, dims[i] - 1);
+    return c;
+  }
+  std::size_t index(int x, int y, int z) const { return (std::size_t(z) * dims[1] + y) * dims[0] + x; }
+
+  // (face, distance) of the nearest face.
+  std::pair<Index, double> nearest(const Vec3d& p) const {
+    const auto c = coord(p);
+    double best = std::numeric_limits<double>::infinity();
+    Index best_face = 0;
+    for (int ring = 0;; ++ring) {
+      for (int x = c[0] - ring; x <= c[0] + ring; ++x)
+        for (int y = c[1] - ring; y <= c[1] + ring; ++y)
+          for (int z = c[2] - ring; z <= c[2] + ring; ++z) {
+            if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != ring) continue;
+            if (x < 0 || y < 0 || z < 0 || x >= dims[0] || y >= dims[1] || z >= dims[2]) continue;
+            for (Index f : cells[index(x, y, z)]) {
+              const Triangle& t = mesh.triangles[f];
+              const double d = (closest_on_triangle(p, mesh.positions[t[0]].cast<double>(),
+                                                    mesh.positions[t[1]].cast<double>(),
+                                                    mesh.positions[t[2]].cast<double>()) -
+                                p)
+                                   .norm();
+              if (d < best) {
+                best = d;
+                best_face = f;
+              }
+            }
+          }
+      // Anything in a farther ring is at least ring * cell away from p.
+      if (best <= ring * cell || ring > std::max({dims[0], dims[1], dims[2]})) return {best_face, best};
+    }
+  }
+};
+
+// Faces of `out` whose normal points against the normal of the nearest face of `original` at their centroid.
+std::size_t turned_faces(const IndexedMesh& original, const IndexedMesh& out) {
+  const FaceGrid grid(original);
+  std::size_t turned = 0;
+  for (const Triangle& t : out.triangles) {
+    const Vec3d centroid = (out.positions[t[0]].cast<double>() + out.positions[t[1]].cast<double>() +
+                            out.positions[t[2]].cast<double>()) /
+                           3;
+    const Index f = grid.nearest(centroid).first;
+    if (face_normal(out, t).dot(face_normal(original, original.triangles[f])) < 0) ++turned;
+  }
+  return turned;
+}
+
+// ------------------------------------------------------------------ exact counts
+
+TEST(Decimate, ExactFaceCountsOnClosedSphere) {
+  const IndexedMesh sphere = test::sphere(5);  // 8192 faces, closed
+  for (std::uint64_t target : {4000u, 1000u, 100u, 12u}) {
+    const DecimateResult r = run(sphere, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target);
+    EXPECT_EQ(r.stats.faces, target);
+    EXPECT_EQ(r.stats.stop, DecimateStop::target_reached);
+    EXPECT_TRUE(r.stats.target_reached);
+    // Still a closed sphere: Euler characteristic 2, no boundary.
+    EXPECT_EQ(euler_characteristic(r.mesh), 2);
+    EXPECT_EQ(analyze_topology(r.mesh).boundary_edges, 0u);
+  }
+  // Odd targets are unreachable on a closed manifold with an even face count: one fewer, never more.
+  for (std::uint64_t target : {999u, 101u}) {
+    const DecimateResult r = run(sphere, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target - 1);
+    EXPECT_EQ(r.stats.stop, DecimateStop::parity);
+    EXPECT_TRUE(r.stats.target_reached);
+  }
+}
+
+TEST(Decimate, ExactVertexCounts) {
+  const IndexedMesh sphere = test::sphere(4);
+  for (std::uint64_t target : {1000u, 301u, 4u}) {
+    DecimateOptions o;
+    o.target_vertices = target;
+    const DecimateResult r = run(sphere, o);
+    EXPECT_EQ(r.mesh.vertex_count(), target);
+    EXPECT_EQ(r.stats.vertices, target);
+    EXPECT_EQ(analyze_topology(r.mesh).unreferenced_vertices, 0u);
+  }
+}
+
+TEST(Decimate, ExactCountsOnOpenMesh) {
+  const IndexedMesh bumpy =
+      height_field(30, [](double x, double y) { return 0.1 * std::sin(6 * x) * std::cos(5 * y); });
+  ASSERT_EQ(bumpy.face_count(), 1800u);
+  for (std::uint64_t target : {901u, 400u, 77u, 3u}) {
+    const DecimateResult r = run(bumpy, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target) << target;
+    EXPECT_EQ(r.stats.stop, DecimateStop::target_reached);
+  }
+  DecimateOptions o;
+  o.target_ratio = 0.1;
+  EXPECT_EQ(run(bumpy, o).mesh.face_count(), 180u);
+}
+
+TEST(Decimate, ExactCountsOnBunny) {
+  OCSIMP_REQUIRE_SHARED_MESH(path, "bunny.ply");
+  const IndexedMesh bunny = read_mesh(path);
+  for (std::uint64_t target : {6945u, 1389u, 694u}) {
+    const DecimateResult r = run(bunny, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target);
+    EXPECT_EQ(r.stats.stop, DecimateStop::target_reached);
+  }
+}
+
+TEST(Decimate, NoFaceTurnsOverOnScans) {
+  // Each output face is compared with the input face nearest its centroid.
+  for (const char* name : {"bunny.ply", "igea.ply"}) {
+    OCSIMP_REQUIRE_SHARED_MESH(path, name);
+    const IndexedMesh scan = read_mesh(path);
+    for (double ratio : {0.1, 0.01}) {
+      if (std::string(name) == "igea.ply" && ratio > 0.05) continue;  // the slowest case adds little
+      DecimateOptions o;
+      o.target_ratio = ratio;
+      const DecimateResult r = run(scan, o);
+      EXPECT_EQ(turned_faces(scan, r.mesh), 0u) << name << " at " << ratio;
+    }
+  }
+}
+
+// ------------------------------------------------------------------ geometry
+
+TEST(Decimate, FlatSquareBecomesTwoTrianglesWithExactCorners) {
+  const IndexedMesh square = test::grid_square(16);
+  const DecimateResult r = run(square, faces(2));
+  ASSERT_EQ(r.mesh.face_count(), 2u);
+  ASSERT_EQ(r.mesh.vertex_count(), 4u);
+  std::set<std::array<float, 3>> corners;
+  for (const Vec3f& p : r.mesh.positions) corners.insert({p.x(), p.y(), p.z()});
+  const std::set<std::array<float, 3>> expected = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  EXPECT_EQ(corners, expected);
+  for (const Triangle& t : r.mesh.triangles) EXPECT_GT(face_normal(r.mesh, t).z(), 0);
+}
+
+TEST(Decimate, CubeKeepsItsCorners) {
+  const IndexedMesh cube = test::cube(6);
+  for (std::uint64_t target : {100u, 12u}) {
+    const DecimateResult r = run(cube, faces(target));
+    ASSERT_EQ(r.mesh.face_count(), target);
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3d c(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+      double nearest = 1e9;
+      for (const Vec3f& p : r.mesh.positions) nearest = std::min(nearest, (p.cast<double>() - c).norm());
+      EXPECT_LT(nearest, 1e-6) << "corner " << c.transpose() << " target " << target;
+    }
+    // Every vertex stays on the cube's surface.
+    for (const Vec3f& p : r.mesh.positions) {
+      const double to_face = std::min({std::abs(p.x()), std::abs(p.x() - 1), std::abs(p.y()),
+                                       std::abs(p.y() - 1), std::abs(p.z()), std::abs(p.z() - 1)});
+      EXPECT_LT(to_face, 1e-6);
+    }
+    EXPECT_EQ(turned_faces(cube, r.mesh), 0u);
+  }
+}
+
+TEST(Decimate, SphereVerticesStayNearTheSphere) {
+  const IndexedMesh sphere = test::sphere(5);
+  const DecimateResult r = run(sphere, faces(500));
+  ASSERT_EQ(r.mesh.face_count(), 500u);
+  // The quadric minimizer of a cap of tangent planes sits slightly outside the sphere, by about a quarter of
+  // the cap's squared angle: each vertex stays within half the square of its longest edge of the sphere (the
+  // sagitta of that edge is an eighth of it), and none is far in absolute terms (edges are about 0.24 long).
+  std::vector<double> longest(r.mesh.vertex_count(), 0);
+  for (const Triangle& t : r.mesh.triangles) {
+    for (int i = 0; i < 3; ++i) {
+      const double l = (r.mesh.positions[t[i]] - r.mesh.positions[t[(i + 1) % 3]]).norm();
+      longest[t[i]] = std::max(longest[t[i]], l);
+      longest[t[(i + 1) % 3]] = std::max(longest[t[(i + 1) % 3]], l);
+    }
+  }
+  double worst = 0;
+  for (std::size_t v = 0; v < r.mesh.vertex_count(); ++v) {
+    const double off = std::abs(r.mesh.positions[v].cast<double>().norm() - 1);
+    EXPECT_LT(off, 0.5 * longest[v] * longest[v]) << v;
+    worst = std::max(worst, off);
+  }
+  EXPECT_LT(worst, 0.03);
+  // Outward normals everywhere: no face turned over.
+  for (const Triangle& t : r.mesh.triangles) {
+    const Vec3d centroid =
+        (r.mesh.positions[t[0]] + r.mesh.positions[t[1]] + r.mesh.positions[t[2]]).cast<double>();
+    EXPECT_GT(face_normal(r.mesh, t).dot(centroid), 0);
+  }
+  // The largest cost applied, as a distance, is of the size of the deviation from the sphere.
+  EXPECT_GT(r.stats.max_error, 0);
+  EXPECT_LT(r.stats.max_error, 0.03);
+}
+
+TEST(Decimate, NoFaceTurnsOverOnABumpyTorus) {
+  IndexedMesh shape = torus(80, 40);
+  for (Vec3f& p : shape.positions) p *= 1 + 0.05f * std::sin(9 * p.x()) * std::sin(7 * p.y());
+  for (std::uint64_t target : {1200u, 200u}) {
+    const DecimateResult r = run(shape, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target);
+    EXPECT_EQ(turned_faces(shape, r.mesh), 0u);
+  }
+}
+
+// ------------------------------------------------------------------ topology
+
+TEST(Decimate, PreserveTopologyKeepsAManifoldManifold) {
+  IndexedMesh shape = torus(60, 30);
+  DecimateOptions o;
+  o.preserve_topology = true;
+  o.target_faces = 40;  // far below what a torus can keep: the guards must stop it
+  const DecimateResult r = run(shape, o);
+  const MeshTopology t = analyze_topology(r.mesh);
+  EXPECT_EQ(t.non_manifold_edges, 0u);
+  EXPECT_EQ(t.non_manifold_vertices, 0u);
+  EXPECT_EQ(t.boundary_edges, 0u);
+  EXPECT_EQ(t.components, 1u);
+  EXPECT_EQ(euler_characteristic(r.mesh), 0);
+  if (r.mesh.face_count() > 40) {
+    EXPECT_EQ(r.stats.stop, DecimateStop::blocked);
+    EXPECT_FALSE(r.stats.target_reached);
+    EXPECT_NE(r.stats.reason.find("link condition"), std::string::npos) << r.stats.reason;
+  }
+}
+
+TEST(Decimate, PreserveTopologyOnAnOpenScan) {
+  OCSIMP_REQUIRE_SHARED_MESH(path, "bunny.ply");
+  const IndexedMesh bunny = read_mesh(path);
+  const MeshTopology before = analyze_topology(bunny);
+  DecimateOptions o;
+  o.preserve_topology = true;
+  o.target_faces = 700;
+  const DecimateResult r = run(bunny, o);
+  EXPECT_EQ(r.mesh.face_count(), 700u);
+  const MeshTopology after = analyze_topology(r.mesh);
+  EXPECT_EQ(after.non_manifold_edges, 0u);
+  EXPECT_EQ(after.non_manifold_vertices, before.non_manifold_vertices);
+  EXPECT_EQ(after.components, before.components);
+  EXPECT_EQ(euler_characteristic(r.mesh), euler_characteristic(bunny));
+}
+
+TEST(Decimate, HandlesNonManifoldComponentsDegeneratesAndDuplicates) {
+  // A sphere, a separate torus, a fin of three faces on one edge, degenerate faces and a zero-area face.
+  IndexedMesh mesh = test::sphere(3);
+  const IndexedMesh ring = torus(20, 10);
+  const Index base = static_cast<Index>(mesh.positions.size());
+  for (const Vec3f& p : ring.positions) mesh.positions.push_back(p + Vec3f(4, 0, 0));
+  for (const Triangle& t : ring.triangles) mesh.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  const Index fin = static_cast<Index>(mesh.positions.size());
+  mesh.positions.insert(mesh.positions.end(),
+                        {{0, 0, 3}, {1, 0, 3}, {0.5f, 1, 3}, {0.5f, -1, 3}, {0.5f, 0, 4}});
+  mesh.triangles.push_back({fin, fin + 1, fin + 2});
+  mesh.triangles.push_back({fin + 1, fin, fin + 3});
+  mesh.triangles.push_back({fin, fin + 1, fin + 4});  // third face on edge (fin, fin+1)
+  mesh.triangles.push_back({fin, fin, fin + 2});      // degenerate: repeated corner
+  mesh.triangles.push_back({fin + 2, fin + 3, fin + 2});
+  mesh.positions.emplace_back(0.25f, 0, 3);  // collinear with fin, fin+1: a zero-area face
+  mesh.triangles.push_back({fin, fin + 5, fin + 1});
+  const MeshTopology before = analyze_topology(mesh);
+  ASSERT_EQ(before.non_manifold_edges, 1u);
+  ASSERT_EQ(before.degenerate_faces, 2u);
+
+  const std::uint64_t valid = mesh.face_count() - 2;
+  const DecimateResult r = run(mesh, faces(valid / 4));
+  EXPECT_EQ(r.stats.dropped_degenerate_faces, 2u);
+  EXPECT_EQ(r.stats.input_faces, valid);
+  EXPECT_EQ(r.mesh.face_count(), valid / 4);
+  EXPECT_EQ(analyze_topology(r.mesh).degenerate_faces, 0u);
+  for (const Vec3f& p : r.mesh.positions) EXPECT_TRUE(p.allFinite());
+}
+
+TEST(Decimate, WeldJoinsDuplicatedVertices) {
+  // The sphere as a triangle soup: every face has its own three vertices.
+  const IndexedMesh sphere = test::sphere(4);
+  IndexedMesh soup;
+  for (const Triangle& t : sphere.triangles) {
+    const Index base = static_cast<Index>(soup.positions.size());
+    for (Index v : t) soup.positions.push_back(sphere.positions[v]);
+    soup.triangles.push_back({base, base + 1, base + 2});
+  }
+  DecimateOptions o = faces(400);
+  o.weld = true;
+  const DecimateResult welded = run(soup, o);
+  EXPECT_EQ(welded.stats.welded_vertices, soup.vertex_count() - sphere.vertex_count());
+  EXPECT_EQ(welded.stats.input_vertices, sphere.vertex_count());
+  EXPECT_EQ(welded.mesh.face_count(), 400u);
+  EXPECT_EQ(analyze_topology(welded.mesh).boundary_edges, 0u);
+  EXPECT_EQ(euler_characteristic(welded.mesh), 2);
+  // Unwelded, the soup is separate triangles: it can only lose whole triangles, and the result is still a
+  // soup.
+  o.weld = false;
+  const DecimateResult loose = run(soup, o);
+  EXPECT_EQ(loose.mesh.face_count(), 400u);
+  EXPECT_EQ(loose.mesh.vertex_count(), 1200u);
+}
+
+TEST(Decimate, PairDistanceJoinsNearbyParts) {
+  // 200 small separate triangles on a 0.1-spaced lattice: edges alone can only delete whole triangles.
+  IndexedMesh cloud;
+  for (int i = 0; i < 200; ++i) {
+    const Vec3f c(float(i % 10) * 0.1f, float((i / 10) % 10) * 0.1f, float(i / 100) * 0.1f);
+    const Index base = static_cast<Index>(cloud.positions.size());
+    cloud.positions.insert(cloud.positions.end(), {c, c + Vec3f(0.06f, 0, 0), c + Vec3f(0, 0.06f, 0.01f)});
+    cloud.triangles.push_back({base, base + 1, base + 2});
+  }
+  DecimateOptions o;
+  o.target_vertices = 150;
+  const DecimateResult alone = run(cloud, o);
+  o.pair_distance = 0.07;
+  const DecimateResult joined = run(cloud, o);
+  EXPECT_EQ(alone.mesh.vertex_count(), 150u);
+  EXPECT_EQ(joined.mesh.vertex_count(), 150u);
+  EXPECT_EQ(alone.mesh.face_count(), 50u);
+  EXPECT_GT(joined.mesh.face_count(), alone.mesh.face_count());
+  EXPECT_LT(analyze_topology(joined.mesh).components, 50u);
+}
+
+std::size_t slivers(const IndexedMesh& m) {
+  std::size_t count = 0;
+  for (const Triangle& t : m.triangles) {
+    const Vec3d a = m.positions[t[0]].cast<double>(), b = m.positions[t[1]].cast<double>(),
+                c = m.positions[t[2]].cast<double>();
+    const double sum = (b - a).squaredNorm() + (c - a).squaredNorm() + (c - b).squaredNorm();
+    count += 2 * std::sqrt(3.0) * (b - a).cross(c - a).norm() < 0.2 * sum;  // quality below 0.2
+  }
+  return count;
+}
+
+TEST(Decimate, ShapePenaltyKeepsSliversOut) {
+  // On a scan the quadric barely tells placements apart in smooth regions, and without the penalty thin
+  // triangles (quality below 0.2) appear; the default penalty keeps them out.
+  OCSIMP_REQUIRE_SHARED_MESH(path, "bunny.ply");
+  const IndexedMesh bunny = read_mesh(path);
+  DecimateOptions plain = faces(6945);
+  plain.shape_weight = 0;
+  const DecimateResult without = run(bunny, plain);
+  const DecimateResult with = run(bunny, faces(6945));
+  EXPECT_GT(slivers(without.mesh), 10u);
+  EXPECT_LT(slivers(with.mesh), slivers(without.mesh) / 10);
+}
+
+// ------------------------------------------------------------------ boundaries
+
+TEST(Decimate, LockedBoundaryDoesNotMove) {
+  const IndexedMesh bumpy =
+      height_field(24, [](double x, double y) { return 0.2 * std::sin(4 * x) * std::sin(3 * y + 0.5); });
+  std::set<std::array<float, 3>> border;
+  for (const Vec3f& p : bumpy.positions) {
+    if (p.x() == 0 || p.x() == 1 || p.y() == 0 || p.y() == 1) border.insert({p.x(), p.y(), p.z()});
+  }
+  DecimateOptions o = faces(150);
+  o.lock_boundary = true;
+  const DecimateResult r = run(bumpy, o);
+  EXPECT_EQ(r.mesh.face_count(), 150u);
+  std::set<std::array<float, 3>> out_border;
+  for (const Vec3f& p : r.mesh.positions) {
+    if (p.x() == 0 || p.x() == 1 || p.y() == 0 || p.y() == 1) out_border.insert({p.x(), p.y(), p.z()});
+  }
+  EXPECT_EQ(out_border, border);  // every border vertex kept, none moved, none added
+  EXPECT_EQ(analyze_topology(r.mesh).boundary_edges, 4u * 24u);
+
+  // Far below what the border allows: blocked, with the reason.
+  o.target_faces = 10;
+  const DecimateResult stuck = run(bumpy, o);
+  EXPECT_GT(stuck.mesh.face_count(), 10u);
+  EXPECT_EQ(stuck.stats.stop, DecimateStop::blocked);
+  EXPECT_FALSE(stuck.stats.target_reached);
+  EXPECT_NE(stuck.stats.reason.find("locked"), std::string::npos) << stuck.stats.reason;
+}
+
+TEST(Decimate, BoundaryWeightKeepsTheBorderStraight) {
+  const IndexedMesh bumpy =
+      height_field(24, [](double x, double y) { return 0.05 * std::sin(5 * x) * std::sin(4 * y); });
+  auto border_drift = [&](double weight) {
+    DecimateOptions o = faces(60);
+    o.boundary_weight = weight;
+    const DecimateResult r = run(bumpy, o);
+    // Boundary vertices of the output: how far from the square's sides (in x, y) they are.
+    const MeshTopology t = analyze_topology(r.mesh);
+    (void)t;
+    std::map<std::pair<Index, Index>, int> uses;
+    for (const Triangle& f : r.mesh.triangles)
+      for (int i = 0; i < 3; ++i) ++uses[std::minmax(f[i], f[(i + 1) % 3])];
+    double drift = 0;
+    for (const auto& [e, n] : uses) {
+      if (n != 1) continue;
+      for (Index v : {e.first, e.second}) {
+        const Vec3f& p = r.mesh.positions[v];
+        drift = std::max(
+            drift,
+            double(std::min({std::abs(p.x()), std::abs(p.x() - 1), std::abs(p.y()), std::abs(p.y() - 1)})));
+      }
+    }
+    return drift;
+  };
+  const double free_drift = border_drift(0);
+  const double kept_drift = border_drift(1);
+  const double stiff_drift = border_drift(100);
+  // Free, the border wanders by a good part of the square; weighted, by a small fraction of an output edge.
+  EXPECT_GT(free_drift, 0.05);
+  EXPECT_LT(kept_drift, 0.005);
+  EXPECT_LT(stiff_drift, kept_drift);
+}
+
+// ------------------------------------------------------------------ error bound
+
+TEST(Decimate, MaxErrorIsHonoured) {
+  const IndexedMesh sphere = test::sphere(5);
+  std::size_t previous_faces = 0;
+  for (double bound : {1e-3, 3e-3, 1e-2}) {
+    DecimateOptions o;
+    o.max_error = bound;
+    const DecimateResult r = run(sphere, o);
+    EXPECT_LE(r.stats.max_error, bound);
+    EXPECT_EQ(r.stats.stop, DecimateStop::max_error);
+    EXPECT_TRUE(r.stats.target_reached);
+    EXPECT_LT(r.mesh.face_count(), sphere.face_count());
+    if (previous_faces > 0) {
+      EXPECT_LT(r.mesh.face_count(), previous_faces);
+    }
+    previous_faces = r.mesh.face_count();
+    // The output surface stays within a few times the bound of the sphere.
+    for (const Vec3f& p : r.mesh.positions) EXPECT_LT(std::abs(p.cast<double>().norm() - 1), 4 * bound);
+  }
+  // With a count target too, whichever comes first.
+  DecimateOptions o = faces(100);
+  o.max_error = 1e-3;
+  const DecimateResult r = run(sphere, o);
+  EXPECT_GT(r.mesh.face_count(), 100u);
+  EXPECT_EQ(r.stats.stop, DecimateStop::max_error);
+  EXPECT_FALSE(r.stats.target_reached);
+}
+
+// ------------------------------------------------------------------ carried quadrics
+
+TEST(Decimate, CarriedQuadricsEqualToFacePlanesChangeNothing) {
+  const IndexedMesh sphere = test::sphere(4);
+  const DecimateResult own = run(sphere, faces(300));
+  const DecimateResult carried = decimate(QuadricMesh{sphere, face_quadrics_per_vertex(sphere)}, faces(300));
+  ASSERT_EQ(own.mesh.vertex_count(), carried.mesh.vertex_count());
+  EXPECT_EQ(own.mesh.triangles, carried.mesh.triangles);
+  for (std::size_t v = 0; v < own.mesh.vertex_count(); ++v) {
+    EXPECT_LT((own.mesh.positions[v] - carried.mesh.positions[v]).norm(), 1e-5f);
+  }
+}
+
+TEST(Decimate, CarriedQuadricsMeasureTheOriginalSurface) {
+  // The mesh to decimate is flat, but its quadrics come from a bumped original with the same connectivity:
+  // the decimator must place vertices against the original (off the flat plane), and keep more vertices where
+  // the original is curved.
+  auto bump = [](double x, double y) {
+    return 0.15 * std::exp(-30 * ((x - 0.3) * (x - 0.3) + (y - 0.5) * (y - 0.5)));
+  };
+  const IndexedMesh original = height_field(30, bump);
+  const IndexedMesh flat = test::grid_square(30);
+  const DecimateResult r = decimate(QuadricMesh{flat, face_quadrics_per_vertex(original)}, faces(200));
+  const DecimateResult plain = run(flat, faces(200));
+  ASSERT_EQ(r.mesh.face_count(), 200u);
+  double far_from_original = 0, lifted = 0;
+  std::size_t near_bump = 0, plain_near_bump = 0;
+  for (const Vec3f& p : r.mesh.positions) {
+    // Vertices never collapsed keep their flat position; placed ones follow the original's planes.
+    if (p.z() != 0) far_from_original = std::max(far_from_original, std::abs(p.z() - bump(p.x(), p.y())));
+    lifted = std::max(lifted, double(p.z()));
+    if (std::hypot(p.x() - 0.3, p.y() - 0.5) < 0.25) ++near_bump;
+  }
+  for (const Vec3f& p : plain.mesh.positions) {
+    EXPECT_EQ(p.z(), 0.0f);
+    if (std::hypot(p.x() - 0.3, p.y() - 0.5) < 0.25) ++plain_near_bump;
+  }
+  EXPECT_GT(lifted, 0.01);                    // placed vertices follow the original's bump
+  EXPECT_LT(far_from_original, 0.02);         // and stay close to it
+  EXPECT_GT(near_bump, 2 * plain_near_bump);  // detail is kept where the original has it
+}
+
+// ------------------------------------------------------------------ attributes
+
+TEST(Decimate, AttributesAreCarriedAndInterpolated) {
+  IndexedMesh sphere = test::sphere(4);
+  for (const Vec3f& p : sphere.positions) {
+    sphere.normals.push_back(p.normalized());
+    sphere.uvs.emplace_back(p.x() * 0.5f + 0.5f, p.y() * 0.5f + 0.5f);
+    sphere.colors.push_back({static_cast<std::uint8_t>(127.5f + 127.5f * p.z()), 10, 20, 255});
+  }
+  const DecimateResult r = run(sphere, faces(200));
+  ASSERT_EQ(r.mesh.normals.size(), r.mesh.vertex_count());
+  ASSERT_EQ(r.mesh.uvs.size(), r.mesh.vertex_count());
+  ASSERT_EQ(r.mesh.colors.size(), r.mesh.vertex_count());
+  for (std::size_t v = 0; v < r.mesh.vertex_count(); ++v) {
+    const Vec3f p = r.mesh.positions[v];
+    EXPECT_GT(r.mesh.normals[v].dot(p.normalized()), 0.97f);
+    EXPECT_NEAR(r.mesh.normals[v].norm(), 1.0f, 1e-5f);
+    EXPECT_NEAR(r.mesh.uvs[v].x(), p.x() * 0.5f + 0.5f, 0.05f);
+    EXPECT_NEAR(double(r.mesh.colors[v][0]), 127.5 + 127.5 * p.z(), 8.0);
+    EXPECT_EQ(r.mesh.colors[v][3], 255);
+  }
+}
+
+TEST(Decimate, AttributeWeightKeepsAttributeSeamsSharp) {
+  // A sphere red above the equator, blue below. Merging a red and a blue vertex blends their colours (the new
+  // vertex lies between them); an attribute weight makes such merges expensive, so fewer blended vertices
+  // remain.
+  IndexedMesh sphere = test::sphere(4);
+  for (const Vec3f& p : sphere.positions)
+    sphere.colors.push_back(p.z() >= 0 ? Color{255, 0, 0, 255} : Color{0, 0, 255, 255});
+  auto blended = [&](double weight) {
+    DecimateOptions o = faces(300);
+    o.attribute_weight = weight;
+    const DecimateResult r = run(sphere, o);
+    EXPECT_EQ(r.mesh.face_count(), 300u);
+    std::size_t count = 0;
+    for (const Color& c : r.mesh.colors) count += c[0] != 0 && c[0] != 255;
+    return count;
+  };
+  const std::size_t plain = blended(0.0), weighted = blended(1.0);
+  EXPECT_GT(plain, 5u);
+  EXPECT_LT(weighted, plain / 2);
+}
+
+// ------------------------------------------------------------------ determinism and errors
+
+TEST(Decimate, SameInputGivesIdenticalBytesForAnyThreadCount) {
+  IndexedMesh shape = torus(90, 45);
+  for (Vec3f& p : shape.positions) p *= 1 + 0.05f * std::sin(13 * p.x()) * std::sin(11 * p.z());
+  DecimateOptions o = faces(900);
+  o.threads = 1;
+  const DecimateResult one = run(shape, o);
+  o.threads = 2;
+  const DecimateResult two = run(shape, o);
+  const DecimateResult again = run(shape, o);
+  for (const DecimateResult* r : {&two, &again}) {
+    ASSERT_EQ(one.mesh.positions.size(), r->mesh.positions.size());
+    ASSERT_EQ(one.mesh.triangles.size(), r->mesh.triangles.size());
+    EXPECT_EQ(std::memcmp(one.mesh.positions.data(), r->mesh.positions.data(),
+                          one.mesh.positions.size() * sizeof(Vec3f)),
+              0);
+    EXPECT_EQ(one.mesh.triangles, r->mesh.triangles);
+    EXPECT_EQ(one.stats.max_error, r->stats.max_error);
+  }
+}
+
+TEST(Decimate, SurvivesArbitrarySoups) {
+  // Random faces over few vertices: non-manifold edges and vertices, duplicates, flips, coincident points.
+  // Every combination of guards must end cleanly with a valid mesh and an honest count.
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 300; ++trial) {
+    IndexedMesh mesh;
+    const int nv = 3 + static_cast<int>(rng() % 40);
+    for (int v = 0; v < nv; ++v) {
+      if (v > 0 && rng() % 5 == 0) {
+        mesh.positions.push_back(mesh.positions[rng() % v]);  // coincident
+      } else {
+        mesh.positions.emplace_back(float(rng() % 7), float(rng() % 7), float(rng() % 3));
+      }
+    }
+    const int nf = 1 + static_cast<int>(rng() % 120);
+    for (int f = 0; f < nf; ++f)
+      mesh.triangles.push_back({Index(rng() % nv), Index(rng() % nv), Index(rng() % nv)});
+    DecimateOptions o;
+    o.target_faces = rng() % 3 == 0 ? 0 : 1 + rng() % nf;
+    o.target_vertices = o.target_faces == 0 || rng() % 3 == 0 ? 1 + rng() % nv : 0;
+    if (rng() % 4 == 0) o.max_error = 0.5;
+    o.preserve_topology = rng() % 2;
+    o.lock_boundary = rng() % 3 == 0;
+    o.weld = rng() % 2;
+    o.pair_distance = rng() % 3 == 0 ? 1.5 : 0;
+    o.threads = 1;
+    const DecimateResult r = run(mesh, o);
+    SCOPED_TRACE(trial);
+    EXPECT_EQ(r.stats.faces, r.mesh.face_count());
+    EXPECT_EQ(r.stats.vertices, r.mesh.vertex_count());
+    EXPECT_LE(r.mesh.face_count(), r.stats.input_faces);
+    const MeshTopology t = analyze_topology(r.mesh);
+    EXPECT_EQ(t.degenerate_faces, 0u);
+    EXPECT_EQ(t.unreferenced_vertices, 0u);
+    for (const Triangle& f : r.mesh.triangles)
+      for (Index v : f) ASSERT_LT(v, r.mesh.vertex_count());
+    if (r.stats.stop == DecimateStop::target_reached) {
+      EXPECT_TRUE((o.target_faces > 0 && r.mesh.face_count() <= o.target_faces) ||
+                  (o.target_vertices > 0 && r.mesh.vertex_count() <= o.target_vertices));
+    }
+    if (o.target_faces > 0 && r.stats.target_reached &&
+        !(o.target_vertices > 0 && r.mesh.vertex_count() <= o.target_vertices)) {
+      EXPECT_LE(r.mesh.face_count(), o.target_faces);
+    }
+    // A target is missed only with a reason.
+    if (!r.stats.target_reached) {
+      EXPECT_FALSE(r.stats.reason.empty());
+    }
+    EXPECT_GE(r.stats.max_error, 0.0);
+    if (o.max_error < 1) {
+      EXPECT_LE(r.stats.max_error, o.max_error);
+    }
+  }
+}
+
+TEST(Decimate, RejectsBadInputWithAClearError) {
+  IndexedMesh bad = test::grid_square(2);
+  bad.triangles.push_back({0, 1, 99});
+  EXPECT_THROW(run(bad, faces(2)), Error);
+  IndexedMesh nan = test::grid_square(2);
+  nan.positions[3].x() = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(run(nan, faces(2)), Error);
+  EXPECT_THROW(run(test::grid_square(2), DecimateOptions{}), Error);
+  DecimateOptions ratio;
+  ratio.target_ratio = 1.5;
+  EXPECT_THROW(run(test::grid_square(2), ratio), Error);
+  IndexedMesh short_normals = test::grid_square(2);
+  short_normals.normals.resize(2);
+  EXPECT_THROW(run(short_normals, faces(2)), Error);
+  try {
+    run(bad, faces(2));
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("face 8"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Decimate, EmptyAndTinyInputs) {
+  const DecimateResult empty = run(IndexedMesh{}, faces(10));
+  EXPECT_EQ(empty.mesh.face_count(), 0u);
+  const DecimateResult one = run(test::grid_square(1), faces(1));
+  EXPECT_EQ(one.mesh.face_count(), 1u);
+  const DecimateResult none = run(test::grid_square(1), faces(10));
+  EXPECT_EQ(none.mesh.face_count(), 2u);
+  EXPECT_EQ(none.stats.stop, DecimateStop::target_reached);
+}
+
+}  // namespace
+}  // namespace ocsimp
