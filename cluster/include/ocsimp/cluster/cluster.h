@@ -1,0 +1,122 @@
+// Streaming vertex clustering: one sequential pass over a TriangleStream of any size, memory bounded by the
+// number of occupied cells (the output), never by the input.
+//
+// Every input vertex falls in a cell of a grid laid over the bounding box. Each cell sums the area-weighted
+// plane quadrics of the triangles touching it (once per corner, like face_quadrics_per_vertex()) and becomes
+// one output vertex. A triangle whose corners fall in three distinct cells survives, re-indexed; one that
+// collapses, or repeats the same three cells, is dropped. Normals, colors and texture coordinates are
+// averaged per cell when the input has them.
+//
+// Two ways of laying the cells:
+//  - a uniform grid (`grid` cells along the longest axis, or cubes of `cell_size`), or, with `target_faces`,
+//    a resolution chosen by re-clustering a fine grid's cells (never by another pass over the input);
+//  - an adaptive octree: a fine power-of-two grid whose sibling cells are merged bottom-up, least quadric
+//    error first, until `target_vertices` (exactly) or `target_faces` (the largest count not above it) is
+//    met.
+//
+// Determinism: the output is the same bytes for any thread count. Each thread owns a fixed part of the cells
+// and sees every triangle, so each cell's sums run in input order whatever the thread count. Cells, and so
+// output vertices, are numbered in Morton order of their grid coordinates, and triangles are sorted, so
+// shuffling the input's triangles changes the output only by the rounding of sums taken in another order.
+//
+// Memory (indexed inputs): the reader's 12 bytes a vertex, which the pass reuses in place to hold each
+// vertex's cell and its position inside the cell (see TriangleStream::scratch_vertices()) and releases once
+// the stream is exhausted, plus about 140 bytes per occupied cell during the pass (a quadric, border planes,
+// the cell's key, its share of the surviving triangles) and about 160 after it. The octree and `target_faces`
+// modes hold `fine_cells_per_target` times more cells than they output while they merge.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "ocsimp/core/mesh.h"
+#include "ocsimp/core/system.h"
+#include "ocsimp/streaming/triangle_stream.h"
+
+namespace ocsimp {
+
+// Where a cell puts its vertex.
+enum class Representative {
+  // The minimizer of the cell's quadric, solved around the mean of the cell's vertices with a truncated
+  // eigen-decomposition (Lindstrom 2000): directions the quadric does not constrain (along a flat cell, along
+  // a cylinder's axis) stay at the mean instead of running off. The cutoff, at 1e-3 of the largest
+  // eigenvalue, is smooth (Tikhonov damping) so that the point varies continuously with the sums. A solution
+  // farther than the cell's own size outside the cell falls back to `constrained`.
+  quadric,
+  // The minimizer of the quadric over the cell's box (Lindstrom & Silva 2001): never leaves the cell.
+  constrained,
+  // The average of the cell's input vertices (Rossignac & Borrel 1993); corners, for triangle soups.
+  mean,
+};
+
+// "quadric", "constrained", "mean".
+const char* representative_name(Representative representative);
+
+struct ClusterOptions {
+  // Uniform grid resolution: `grid` cells along the longest bounding-box axis (1 .. 2^21), unless
+  // `cell_size` > 0 gives the cells' edge length instead. Ignored by the octree and when `target_faces` > 0.
+  std::uint32_t grid = 256;
+  double cell_size = 0;
+
+  // Adaptive octree instead of the uniform grid. Needs exactly one of `target_vertices`, `target_faces`.
+  bool octree = false;
+  // Octree only: exactly this many output vertices (fewer only when the finest grid the input allows has
+  // fewer occupied cells; ClusterStats::target_met then says so).
+  std::uint64_t target_vertices = 0;
+  // Octree: the largest face count not above this that merging reaches. Uniform grid: the resolution whose
+  // face count is the largest not above this, among the re-clusterings of the fine grid's cells.
+  std::uint64_t target_faces = 0;
+  // Target-driven modes accumulate on a fine power-of-two grid of about this many occupied cells per
+  // targeted output vertex (a face target counts as target_faces / 2 vertices), then merge.
+  double fine_cells_per_target = 8;
+
+  Representative representative = Representative::quadric;
+
+  // Keep open borders from shrinking, without connectivity (Lindstrom & Silva 2001): every edge that crosses
+  // between two cells adds the oriented plane through it perpendicular to its triangle to both cells, per
+  // direction class. An interior edge is added twice with opposite orientations and cancels; what remains
+  // at a cell are the planes of the border (and the bisecting planes of sharp creases) running through it,
+  // which the representative is then also fitted to. Needs consistently oriented input: a flipped triangle
+  // makes its edges look like borders. These planes only place vertices: the output quadrics stay those of
+  // the original surface, so the decimator measures distance to the surface alone.
+  bool preserve_boundary = true;
+  // Weight of a border crossing relative to a full cell of surface (cell_size^2 of area). A slot's plane
+  // weighs the square of its summed normals' length, so cancelled interior edges weigh nothing.
+  double boundary_weight = 1.0;
+
+  unsigned threads = 0;  // 0: all cores. The output does not depend on it.
+
+  // Phases "cluster: vertices" (vertices), "cluster: faces" (bytes of input), "cluster: merge" (merges),
+  // "cluster: place" (cells).
+  ProgressFn progress;
+};
+
+struct ClusterStats {
+  std::uint64_t input_vertices = 0;   // of the stream's vertex array (0 for triangle soups)
+  std::uint64_t input_triangles = 0;  // triangles read
+  std::uint64_t fine_cells = 0;       // occupied cells of the grid the pass accumulated on
+  std::uint32_t fine_grid = 0;        // that grid's cells along the longest axis
+  double fine_cell_size = 0;
+  std::uint64_t output_vertices = 0;  // = clusters
+  std::uint64_t output_faces = 0;
+  std::uint64_t collapsed_triangles = 0;  // input triangles with two corners in one output cell
+  std::uint64_t duplicate_triangles = 0;  // input triangles whose three output cells an earlier one had
+  std::uint64_t isolated_vertices = 0;    // output vertices no output face uses (every triangle collapsed)
+  // Uniform grid: the output cells' edge length and how many of them span the longest axis (rounded up:
+  // with `target_faces` the resolution need not be whole).
+  std::uint32_t output_grid = 0;
+  double output_cell_size = 0;
+  bool target_met = true;                 // false when a vertex/face target could not be reached
+  double seconds = 0;                     // wall time of cluster()
+  std::uint64_t peak_rss_bytes = 0;       // of the process, when cluster() returned
+};
+
+// Clusters the stream in one pass and returns the mesh with one quadric per vertex (the sum of the plane
+// quadrics of the original triangles that touched the cell). Consumes the stream; an indexed stream's vertex
+// array is emptied (see the top of this file). Throws Error on bad input (non-finite
+// coordinates, indices past the vertex array) and on impossible options (a cell size giving more than 2^21
+// cells along an axis, an octree without a target, more than 2^31 occupied cells).
+QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options = {},
+                    ClusterStats* stats = nullptr);
+
+}  // namespace ocsimp

@@ -1,0 +1,278 @@
+#include "ocsimp/cluster/cluster.h"
+
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "cells.h"
+#include "ocsimp/core/error.h"
+#include "place.h"
+#include "regroup.h"
+
+namespace ocsimp {
+
+const char* representative_name(Representative representative) {
+  switch (representative) {
+    case Representative::quadric:
+      return "quadric";
+    case Representative::constrained:
+      return "constrained";
+    case Representative::mean:
+      return "mean";
+  }
+  return "unknown";
+}
+
+namespace cluster_detail {
+namespace {
+
+// Removes cells no triangle touched (they only hold unreferenced vertices) and renumbers the triangles.
+void drop_untouched(FineCells& cells) {
+  const std::size_t n = cells.size();
+  std::vector<std::uint32_t> renumber(n);
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    renumber[i] = static_cast<std::uint32_t>(kept);
+    if (!cells.touched[i]) continue;
+    if (kept != i) {
+      cells.keys[kept] = cells.keys[i];
+      cells.quadrics[kept] = cells.quadrics[i];
+      if (cells.has_border()) cells.border[kept] = cells.border[i];
+      cells.points[kept] = cells.points[i];
+      cells.point_sum[kept] = cells.point_sum[i];
+      if (!cells.normal_sum.empty()) cells.normal_sum[kept] = cells.normal_sum[i];
+      if (!cells.color_sum.empty()) cells.color_sum[kept] = cells.color_sum[i];
+      if (!cells.uv_sum.empty()) cells.uv_sum[kept] = cells.uv_sum[i];
+    }
+    ++kept;
+  }
+  if (kept == n) return;
+  auto shrink = [kept](auto& v) {
+    if (!v.empty()) {
+      v.resize(kept);
+      v.shrink_to_fit();
+    }
+  };
+  shrink(cells.keys);
+  shrink(cells.quadrics);
+  shrink(cells.border);
+  shrink(cells.points);
+  shrink(cells.point_sum);
+  shrink(cells.normal_sum);
+  shrink(cells.color_sum);
+  shrink(cells.uv_sum);
+  cells.touched.assign(kept, 1);
+  // Renumbering keeps the order of cells, so the triangles stay ascending and sorted.
+  for (CellTriangle& t : cells.triangles) {
+    t = CellTriangle{renumber[t.first()], renumber[t.second()] | (t.b & CellTriangle::kFlag),
+                     renumber[t.third()] | (t.c & CellTriangle::kFlag)};
+  }
+}
+
+struct Attributes {
+  Vec3d normal = Vec3d::Zero();
+  std::array<std::uint64_t, 4> color{0, 0, 0, 0};
+  Vec2d uv = Vec2d::Zero();
+};
+
+void write_attributes(const FineCells& cells, std::size_t cell, Attributes& a) {
+  if (!cells.normal_sum.empty()) a.normal += cells.normal_sum[cell].cast<double>();
+  if (!cells.color_sum.empty()) {
+    for (int c = 0; c < 4; ++c) a.color[c] += cells.color_sum[cell][c];
+  }
+  if (!cells.uv_sum.empty()) a.uv += cells.uv_sum[cell];
+}
+
+void store_attributes(const FineCells& cells, const Attributes& a, double points, std::size_t out,
+                      IndexedMesh& mesh) {
+  if (!cells.normal_sum.empty()) {
+    const double length = a.normal.norm();
+    mesh.normals[out] = length > 0 ? Vec3f((a.normal / length).cast<float>()) : Vec3f::Zero();
+  }
+  const double divide = points > 0 ? points : 1.0;
+  if (!cells.color_sum.empty()) {
+    for (int c = 0; c < 4; ++c) {
+      mesh.colors[out][c] = static_cast<std::uint8_t>(
+          std::min(255.0, std::floor(static_cast<double>(a.color[c]) / divide + 0.5)));
+    }
+  }
+  if (!cells.uv_sum.empty()) mesh.uvs[out] = (a.uv / divide).cast<float>();
+}
+
+// Builds the output: one vertex per cluster, the clusters' triangles, and the surface quadrics.
+QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const ClusterOptions& options,
+                     ClusterStats& stats) {
+  QuadricMesh out;
+  IndexedMesh& mesh = out.mesh;
+  const std::size_t n = cells.size();
+  const std::size_t clusters = clustering ? clustering->count : n;
+  mesh.positions.resize(clusters);
+  if (!cells.normal_sum.empty()) mesh.normals.resize(clusters);
+  if (!cells.color_sum.empty()) mesh.colors.resize(clusters);
+  if (!cells.uv_sum.empty()) mesh.uvs.resize(clusters);
+
+  std::vector<Triangle> triangles;
+  report(options.progress, "cluster: place", 0, clusters);
+  if (!clustering) {
+    // Every fine cell is an output vertex.
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+      const PlacementSums sums = cell_placement_sums(cells, i, options.boundary_weight);
+      mesh.positions[i] = place(sums, options.representative).point.cast<float>();
+      Attributes a;
+      write_attributes(cells, i, a);
+      store_attributes(cells, a, sums.points, i, mesh);
+    });
+    out.quadrics = std::move(cells.quadrics);
+    triangles.reserve(cells.triangles.size());
+    for (const CellTriangle& t : cells.triangles) triangles.push_back(t.oriented());
+  } else {
+    // Members of each cluster, in fine-cell order so every sum runs in the same order.
+    std::vector<std::uint32_t> first(clusters + 1, 0), member(n);
+    for (std::uint32_t c : clustering->cluster_of) ++first[c + 1];
+    for (std::size_t c = 0; c < clusters; ++c) first[c + 1] += first[c];
+    {
+      std::vector<std::uint32_t> fill(first.begin(), first.end() - 1);
+      for (std::size_t i = 0; i < n; ++i)
+        member[fill[clustering->cluster_of[i]]++] = static_cast<std::uint32_t>(i);
+    }
+    out.quadrics.resize(clusters);
+    tbb::parallel_for(std::size_t{0}, clusters, [&](std::size_t c) {
+      PlacementSums sums;
+      Quadric surface;
+      Attributes a;
+      for (std::uint32_t k = first[c]; k < first[c + 1]; ++k) {
+        const std::uint32_t i = member[k];
+        sums.add(cell_placement_sums(cells, i, options.boundary_weight));
+        surface += cells.quadrics[i];
+        write_attributes(cells, i, a);
+      }
+      mesh.positions[c] = place(sums, options.representative).point.cast<float>();
+      out.quadrics[c] = surface;
+      store_attributes(cells, a, sums.points, c, mesh);
+    });
+    std::vector<CellTriangle> mapped;
+    mapped.reserve(cells.triangles.size());
+    for (const CellTriangle& t : cells.triangles) {
+      const std::uint32_t a = clustering->cluster_of[t.first()], b = clustering->cluster_of[t.second()],
+                          c = clustering->cluster_of[t.third()];
+      if (a == b || b == c || c == a) continue;
+      CellTriangle m = CellTriangle::of(a, b, c);
+      if (!t.seen_forward()) m = CellTriangle::of(a, c, b);
+      if (t.seen_forward() && t.seen_reversed()) m.merge_flags(CellTriangle::of(a, c, b));
+      mapped.push_back(m);
+    }
+    tbb::parallel_sort(mapped.begin(), mapped.end());
+    for (std::size_t i = 0; i < mapped.size();) {
+      CellTriangle t = mapped[i];
+      std::size_t j = i + 1;
+      for (; j < mapped.size() && mapped[j].same_cells(t); ++j) t.merge_flags(mapped[j]);
+      triangles.push_back(t.oriented());
+      i = j;
+    }
+  }
+  mesh.triangles = std::move(triangles);
+  report(options.progress, "cluster: place", clusters, clusters);
+
+  std::vector<std::uint8_t> used(clusters, 0);
+  for (const Triangle& t : mesh.triangles)
+    for (Index v : t) used[v] = 1;
+  stats.isolated_vertices = static_cast<std::uint64_t>(std::count(used.begin(), used.end(), 0));
+  stats.output_vertices = clusters;
+  stats.output_faces = mesh.triangles.size();
+  return out;
+}
+
+int level_for(double cells) {
+  // A surface spanning its box occupies about side^2 cells.
+  const double side = std::sqrt(std::max(1.0, cells));
+  return std::clamp(static_cast<int>(std::ceil(std::log2(side))), 0, kCoordBits);
+}
+
+QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned threads,
+                ClusterStats& stats) {
+  const Box3 bounds = stream.bounds();
+  PassOptions pass;
+  pass.boundary = options.preserve_boundary;
+  pass.threads = threads;
+  pass.progress = options.progress;
+  const bool targeted = options.octree || options.target_faces > 0;
+  if (targeted) {
+    const double vertices = options.octree && options.target_vertices > 0
+                                ? static_cast<double>(options.target_vertices)
+                                : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
+    const double fine = std::max(64.0, options.fine_cells_per_target * vertices);
+    pass.target_cells = static_cast<std::uint64_t>(std::min(fine, 2e9));
+    pass.grid = Grid::power_of_two(bounds, level_for(fine));
+  } else if (options.cell_size > 0) {
+    pass.grid = Grid::sized(bounds, options.cell_size);
+  } else {
+    pass.grid = Grid::uniform(bounds, options.grid);
+  }
+
+  FineCells cells = accumulate(stream, pass);
+  drop_untouched(cells);
+  stats.input_vertices = cells.input_vertices;
+  stats.input_triangles = cells.input_triangles;
+  stats.fine_cells = cells.size();
+  stats.fine_grid = cells.grid.along_longest;
+  stats.fine_cell_size = cells.grid.cell;
+  stats.collapsed_triangles = cells.input_triangles - cells.surviving_instances;
+  stats.duplicate_triangles = cells.surviving_instances - cells.triangles.size();
+
+  if (!targeted) {
+    stats.output_grid = cells.grid.along_longest;
+    stats.output_cell_size = cells.grid.cell;
+    return assemble(cells, nullptr, options, stats);
+  }
+  Clustering clustering;
+  if (options.octree) {
+    OctreeTarget target;
+    target.vertices = options.target_vertices;
+    target.faces = options.target_faces;
+    clustering =
+        octree_merge(cells, target, options.representative, options.boundary_weight, options.progress);
+  } else {
+    clustering = regrid_to_faces(cells, options.target_faces);
+    stats.output_grid = static_cast<std::uint32_t>(std::ceil(clustering.along_longest));
+    stats.output_cell_size = cells.grid.cell * cells.grid.along_longest / clustering.along_longest;
+  }
+  stats.target_met = clustering.target_met;
+  return assemble(cells, &clustering, options, stats);
+}
+
+}  // namespace
+}  // namespace cluster_detail
+
+QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options, ClusterStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  if (options.octree && (options.target_vertices > 0) == (options.target_faces > 0)) {
+    throw Error("the octree needs exactly one target: a vertex count or a face count");
+  }
+  if (!options.octree && options.target_vertices > 0) {
+    throw Error("an exact vertex count needs the octree");
+  }
+  if (!(options.fine_cells_per_target >= 1.0) || !std::isfinite(options.fine_cells_per_target)) {
+    throw Error("fine_cells_per_target must be at least 1");
+  }
+  if (!(options.boundary_weight >= 0.0) || !std::isfinite(options.boundary_weight)) {
+    throw Error("the boundary weight must be a non-negative number");
+  }
+  const unsigned threads = options.threads > 0
+                               ? options.threads
+                               : static_cast<unsigned>(std::max(1, tbb::info::default_concurrency()));
+  ClusterStats local;
+  tbb::task_arena arena(static_cast<int>(threads));
+  QuadricMesh result = arena.execute([&] { return cluster_detail::run(stream, options, threads, local); });
+  local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  local.peak_rss_bytes = peak_rss_bytes();
+  if (stats) *stats = local;
+  return result;
+}
+
+}  // namespace ocsimp

@@ -1,0 +1,110 @@
+// The grid the cluster stage lays over a bounding box: cell keys, Morton order, locating points.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+#include "ocsimp/core/types.h"
+
+namespace ocsimp::cluster_detail {
+
+// A cell's integer coordinates packed into one word: x | y << 21 | z << 42.
+using CellKey = std::uint64_t;
+inline constexpr int kCoordBits = 21;
+inline constexpr std::uint32_t kMaxCellsPerAxis = 1u << kCoordBits;
+inline constexpr std::uint64_t kCoordMask = kMaxCellsPerAxis - 1;
+inline constexpr CellKey kNoKey = ~CellKey{0};  // never a key: bit 63 is always clear in keys
+
+inline CellKey make_key(std::uint64_t x, std::uint64_t y, std::uint64_t z) {
+  return x | (y << kCoordBits) | (z << (2 * kCoordBits));
+}
+inline std::array<std::uint32_t, 3> key_coords(CellKey key) {
+  return {static_cast<std::uint32_t>(key & kCoordMask),
+          static_cast<std::uint32_t>((key >> kCoordBits) & kCoordMask),
+          static_cast<std::uint32_t>((key >> (2 * kCoordBits)) & kCoordMask)};
+}
+// The cell of the grid with half the resolution that contains this one.
+inline CellKey parent_key(CellKey key) {
+  const auto c = key_coords(key);
+  return make_key(c[0] >> 1, c[1] >> 1, c[2] >> 1);
+}
+
+inline std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffull;
+  v = (v | v << 16) & 0x1f0000ff0000ffull;
+  v = (v | v << 8) & 0x100f00f00f00f00full;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+  v = (v | v << 2) & 0x1249249249249249ull;
+  return v;
+}
+// Morton order (interleaved coordinate bits): the cells of an octree node are contiguous in it, so it numbers
+// output vertices coherently and lets the octree find siblings by shifting.
+inline std::uint64_t morton(CellKey key) {
+  const auto c = key_coords(key);
+  return spread_bits(c[0]) | (spread_bits(c[1]) << 1) | (spread_bits(c[2]) << 2);
+}
+
+inline std::uint64_t mix64(std::uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ull;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebull;
+  x ^= x >> 31;
+  return x;
+}
+
+// Cubic cells of edge `cell` with cell (0,0,0) starting at `origin`.
+struct Grid {
+  Vec3d origin = Vec3d::Zero();
+  double cell = 1.0;
+  double inverse_cell = 1.0;
+  std::array<std::uint32_t, 3> dims{1, 1, 1};
+  std::uint32_t along_longest = 1;  // cells along the longest axis of the box the grid was made for
+  int level = -1;                   // power-of-two grids: log2(along_longest); -1 otherwise
+
+  // `cells` cubes along the box's longest axis. Throws Error for a non-finite box.
+  static Grid uniform(const Box3& bounds, std::uint32_t cells);
+  // Cubes of edge `size`. Throws Error when that makes more than 2^21 cells along an axis.
+  static Grid sized(const Box3& bounds, double size);
+  // 2^level cubes along the longest axis; coarser() halves it, keeping every old cell inside one new cell.
+  static Grid power_of_two(const Box3& bounds, int level);
+  Grid coarser() const;
+
+  // The cell holding p (clamped into the grid, which also catches NaN) and p's offset inside it in cell
+  // units.
+  CellKey locate(const Vec3d& p, Vec3d& local) const {
+    std::uint64_t c[3];
+    for (int a = 0; a < 3; ++a) {
+      const double t = (p[a] - origin[a]) * inverse_cell;
+      // Truncation is the floor for t >= 0 and, unlike std::floor without SSE4.1, needs no library call.
+      std::uint64_t i = 0;
+      if (t >= static_cast<double>(dims[a])) {
+        i = dims[a] - 1;
+      } else if (t > 0.0) {
+        i = static_cast<std::uint64_t>(t);
+      }
+      c[a] = i;
+      local[a] = t - static_cast<double>(i);
+    }
+    return make_key(c[0], c[1], c[2]);
+  }
+  CellKey locate(const Vec3d& p) const {
+    Vec3d local;
+    return locate(p, local);
+  }
+  Vec3d cell_origin(CellKey key) const {
+    const auto c = key_coords(key);
+    return origin + cell * Vec3d(static_cast<std::int32_t>(c[0]), static_cast<std::int32_t>(c[1]),
+                                 static_cast<std::int32_t>(c[2]));
+  }
+  Box3 cell_box(CellKey key) const {
+    Box3 box;
+    box.lo = cell_origin(key);
+    box.hi = box.lo + Vec3d::Constant(cell);
+    return box;
+  }
+};
+
+}  // namespace ocsimp::cluster_detail

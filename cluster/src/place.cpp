@@ -1,0 +1,147 @@
+#include "place.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace ocsimp::cluster_detail {
+namespace {
+
+// Relative eigenvalue scale below which a direction counts as unconstrained (as in ocsimp::minimize()).
+constexpr double kTruncation = 1e-3;
+
+// Offset y minimizing y^T M y + 2 g^T y along the directions M constrains: a pseudo-inverse whose cutoff at
+// eigenvalue `tau` is smooth (Tikhonov damping, lambda / (lambda^2 + tau^2) in place of 1 / lambda). Away
+// from the cutoff it is Lindstrom's truncated solve; near it, unlike a hard cutoff, it varies continuously
+// with the quadric, so sums taken in another order (a shuffled input) cannot flip a direction in or out and
+// move the vertex by a visible step.
+Vec3d damped_step(const Eigen::Matrix3d& m, const Vec3d& g, double tau) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(m);
+  const Vec3d values = solver.eigenvalues();
+  const Eigen::Matrix3d vectors = solver.eigenvectors();
+  Vec3d step = Vec3d::Zero();
+  for (int i = 0; i < 3; ++i) {
+    const double l = values(i);
+    if (!(l > 0.0)) continue;
+    const Vec3d v = vectors.col(i);
+    step -= v * (v.dot(g) * l / (l * l + tau * tau));
+  }
+  return step;
+}
+
+double largest_eigenvalue(const Eigen::Matrix3d& a) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(a, Eigen::EigenvaluesOnly);
+  return solver.eigenvalues().cwiseAbs().maxCoeff();
+}
+
+bool outside_by_more_than_its_size(const Vec3d& p, const Box3& box) {
+  const Vec3d size = box.extent();
+  for (int a = 0; a < 3; ++a) {
+    if (p[a] < box.lo[a] - size[a] || p[a] > box.hi[a] + size[a]) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+Vec3d minimize_damped(const Quadric& q, const Vec3d& origin) {
+  const Eigen::Matrix3d a = q.a();
+  const double tau = kTruncation * largest_eigenvalue(a);
+  if (!(tau > 0.0) || !std::isfinite(tau)) return origin;
+  return origin + damped_step(a, a * origin + q.b(), tau);
+}
+
+Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, double weight) {
+  Quadric q;
+  const Vec3d origin = grid.cell_origin(key);
+  for (const auto& s : border.slot) {
+    const Vec3d m(s[0], s[1], s[2]);
+    const double length = m.norm();
+    if (!(length > 0.0)) continue;
+    const Vec3d n = m / length;
+    // n . (x - origin) / cell + w / length = 0, in world units. The weight grows with the square of what is
+    // left of the normals: one border crossing leaves 1, the cancellation of interior edges leaves ~1e-6 of
+    // float residue (weight 1e-12) and, on curved surfaces, their small dihedral angles (tangent planes,
+    // which agree with the surface anyway). No threshold, so nothing flips when sums are taken in another
+    // order.
+    const double d = grid.cell * s[3] / length - n.dot(origin);
+    q += Quadric::plane(n, d, weight * length * length * grid.cell * grid.cell);
+  }
+  return q;
+}
+
+PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, double boundary_weight) {
+  PlacementSums s;
+  const CellKey key = cells.keys[cell];
+  s.quadric = cells.quadrics[cell];
+  if (cells.has_border()) s.quadric += border_quadric(cells.border[cell], cells.grid, key, boundary_weight);
+  s.points = cells.points[cell];
+  s.point_sum =
+      s.points * cells.grid.cell_origin(key) + cells.grid.cell * cells.point_sum[cell].cast<double>();
+  s.box = cells.grid.cell_box(key);
+  return s;
+}
+
+Vec3d minimize_in_box(const Quadric& q, const Box3& box, const Vec3d& start) {
+  const Eigen::Matrix3d a = q.a();
+  const double floor = kTruncation * largest_eigenvalue(a);
+  const Vec3d inside = start.cwiseMax(box.lo).cwiseMin(box.hi);
+  if (!(floor > 0.0) || !std::isfinite(floor)) return inside;
+  const Vec3d slack = 1e-9 * (box.extent() + Vec3d::Constant(1e-300));
+  Vec3d best = inside;
+  double best_value = std::numeric_limits<double>::infinity();
+  // Each axis free (0), at its low side (1) or at its high side (2): 27 sub-problems, the unconstrained
+  // one first; it usually lands inside and ends the search.
+  for (int code = 0; code < 27; ++code) {
+    int mode[3] = {code % 3, (code / 3) % 3, code / 9};
+    Vec3d x = inside;
+    Eigen::Matrix3d m = a;
+    for (int k = 0; k < 3; ++k) {
+      if (mode[k] == 0) continue;
+      x[k] = mode[k] == 1 ? box.lo[k] : box.hi[k];
+      m.row(k).setZero();
+      m.col(k).setZero();
+    }
+    Vec3d g = a * x + q.b();
+    for (int k = 0; k < 3; ++k)
+      if (mode[k] != 0) g[k] = 0;
+    x += damped_step(m, g, floor);
+    bool feasible = true;
+    for (int k = 0; k < 3 && feasible; ++k) {
+      if (mode[k] == 0) feasible = x[k] >= box.lo[k] - slack[k] && x[k] <= box.hi[k] + slack[k];
+    }
+    if (!feasible) continue;
+    x = x.cwiseMax(box.lo).cwiseMin(box.hi);
+    const double value = q.evaluate(x);
+    if (value < best_value) {
+      best_value = value;
+      best = x;
+    }
+    if (code == 0) break;  // the unconstrained minimizer is inside: nothing on the boundary is lower
+  }
+  return best;
+}
+
+Placement place(const PlacementSums& sums, Representative representative) {
+  const Vec3d mean = sums.mean();
+  Vec3d point = mean;
+  switch (representative) {
+    case Representative::mean:
+      break;
+    case Representative::quadric:
+      point = minimize_damped(sums.quadric, mean);
+      if (!point.allFinite() || outside_by_more_than_its_size(point, sums.box)) {
+        point = minimize_in_box(sums.quadric, sums.box, mean);
+      }
+      break;
+    case Representative::constrained:
+      point = minimize_in_box(sums.quadric, sums.box, mean);
+      break;
+  }
+  return {point, std::max(0.0, sums.quadric.evaluate(point))};
+}
+
+}  // namespace ocsimp::cluster_detail

@@ -1,0 +1,46 @@
+// Where a cluster of cells puts its vertex, and what that costs.
+#pragma once
+
+#include "cells.h"
+#include "ocsimp/cluster/cluster.h"
+#include "ocsimp/core/quadric.h"
+
+namespace ocsimp::cluster_detail {
+
+// What placement needs of a cluster; sums over its cells.
+struct PlacementSums {
+  Quadric quadric;  // the surface quadric plus the border planes
+  Vec3d point_sum = Vec3d::Zero();
+  double points = 0;
+  Box3 box;  // union of the cells' boxes
+
+  void add(const PlacementSums& o) {
+    quadric += o.quadric;
+    point_sum += o.point_sum;
+    points += o.points;
+    box.add(o.box);
+  }
+  Vec3d mean() const { return points > 0 ? Vec3d(point_sum / points) : box.center(); }
+};
+
+// The border planes of a cell as a quadric: each direction slot whose planes did not cancel becomes the
+// plane of their summed normal and offset, weighted by `weight` x (crossings left) x cell_size^2.
+Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, double weight);
+
+PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, double boundary_weight);
+
+struct Placement {
+  Vec3d point;
+  double error;  // the placement quadric at `point`, clamped to >= 0
+};
+Placement place(const PlacementSums& sums, Representative representative);
+
+// The minimizer of q nearest `origin` along the directions q leaves free: a pseudo-inverse solve with a
+// smooth cutoff at 1e-3 of the largest eigenvalue (see place.cpp).
+Vec3d minimize_damped(const Quadric& q, const Vec3d& origin);
+
+// The minimizer of q over `box`: the best of the unconstrained solve and the solves restricted to each face,
+// edge and corner of the box (each a damped solve around `start` clamped into the box).
+Vec3d minimize_in_box(const Quadric& q, const Box3& box, const Vec3d& start);
+
+}  // namespace ocsimp::cluster_detail

@@ -1,0 +1,477 @@
+#include "ocsimp/cluster/cluster.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <numeric>
+#include <random>
+
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+#include "ocsimp/streaming/mesh_stream.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+QuadricMesh run(const IndexedMesh& mesh, const ClusterOptions& options, ClusterStats* stats = nullptr,
+                bool as_soup = false) {
+  auto stream = make_mesh_stream(mesh, as_soup, 1000);
+  return cluster(*stream, options, stats);
+}
+
+ClusterOptions grid_options(std::uint32_t grid, Representative representative = Representative::quadric) {
+  ClusterOptions o;
+  o.grid = grid;
+  o.representative = representative;
+  return o;
+}
+
+// Rotates and moves a mesh so that nothing lines up with the grid's axes; computed in double and rounded
+// once.
+const Eigen::Matrix3d kTilt = (Eigen::AngleAxisd(0.5, Vec3d(1, 2, 3).normalized()) *
+                               Eigen::AngleAxisd(0.3, Vec3d(-2, 1, 0.5).normalized()))
+                                  .toRotationMatrix();
+const Vec3d kShift(0.3, -0.2, 0.1);
+IndexedMesh tilted(IndexedMesh mesh) {
+  for (Vec3f& p : mesh.positions) p = (kTilt * p.cast<double>() + kShift).cast<float>();
+  return mesh;
+}
+
+double point_triangle_distance(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  const Vec3d ab = b - a, ac = c - a, n = ab.cross(ac);
+  const double area2 = n.squaredNorm();
+  if (area2 > 0) {
+    // Inside the prism over the triangle: the distance to the plane.
+    const Vec3d ap = p - a;
+    const double u = (ap.cross(ac)).dot(n) / area2, v = (ab.cross(ap)).dot(n) / area2;
+    if (u >= 0 && v >= 0 && u + v <= 1) return std::abs(ap.dot(n)) / std::sqrt(area2);
+  }
+  auto segment = [&](const Vec3d& s, const Vec3d& t) {
+    const Vec3d d = t - s;
+    const double len2 = d.squaredNorm();
+    const double x = len2 > 0 ? std::clamp((p - s).dot(d) / len2, 0.0, 1.0) : 0.0;
+    return (s + x * d - p).norm();
+  };
+  return std::min(segment(a, b), std::min(segment(b, c), segment(c, a)));
+}
+
+double distance_to_mesh(const Vec3d& p, const IndexedMesh& mesh) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const Triangle& t : mesh.triangles) {
+    best = std::min(best, point_triangle_distance(p, mesh.positions[t[0]].cast<double>(),
+                                                  mesh.positions[t[1]].cast<double>(),
+                                                  mesh.positions[t[2]].cast<double>()));
+  }
+  return best;
+}
+
+// The indices of the border vertices of a mesh (on an edge used by one face).
+std::vector<Index> border_vertices(const IndexedMesh& mesh) {
+  std::map<std::pair<Index, Index>, int> uses;
+  for (const Triangle& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) ++uses[std::minmax(t[k], t[(k + 1) % 3])];
+  std::vector<Index> border;
+  for (const auto& [edge, count] : uses) {
+    if (count == 1) {
+      border.push_back(edge.first);
+      border.push_back(edge.second);
+    }
+  }
+  std::sort(border.begin(), border.end());
+  border.erase(std::unique(border.begin(), border.end()), border.end());
+  return border;
+}
+
+// A lumpy sphere with two holes: borders, curvature and uneven cells.
+IndexedMesh lumpy_sphere_with_holes() {
+  IndexedMesh mesh = test::sphere(5);
+  for (Vec3f& p : mesh.positions) {
+    p *= 1.0f + 0.08f * std::sin(5 * p.x()) * std::cos(3 * p.y() + p.z());
+  }
+  std::vector<Triangle> kept;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3f c = (mesh.positions[t[0]] + mesh.positions[t[1]] + mesh.positions[t[2]]) / 3;
+    if ((c - Vec3f(0, 0, 1)).norm() < 0.35f || (c - Vec3f(0.8f, 0.6f, 0)).norm() < 0.25f) continue;
+    kept.push_back(t);
+  }
+  mesh.triangles = kept;
+  return mesh;
+}
+
+bool same_bytes(const QuadricMesh& a, const QuadricMesh& b) {
+  auto bytes = [](const auto& va, const auto& vb) {
+    return va.size() == vb.size() &&
+           (va.empty() || std::memcmp(va.data(), vb.data(), va.size() * sizeof(va[0])) == 0);
+  };
+  return bytes(a.mesh.positions, b.mesh.positions) && bytes(a.mesh.triangles, b.mesh.triangles) &&
+         bytes(a.quadrics, b.quadrics) && bytes(a.mesh.normals, b.mesh.normals) &&
+         bytes(a.mesh.colors, b.mesh.colors) && bytes(a.mesh.uvs, b.mesh.uvs);
+}
+
+TEST(Cluster, TessellatedPlaneClustersOntoThePlane) {
+  const IndexedMesh plane = tilted(test::grid_square(200));
+  const Vec3d n = kTilt * Vec3d::UnitZ();
+  const Vec3d origin = kShift;
+  const double diagonal = plane.bounds().diagonal();
+  for (Representative r : {Representative::quadric, Representative::constrained, Representative::mean}) {
+    ClusterStats stats;
+    const QuadricMesh out = run(plane, grid_options(16, r), &stats);
+    ASSERT_GT(out.mesh.vertex_count(), 100u) << representative_name(r);
+    ASSERT_GT(out.mesh.face_count(), 100u);
+    EXPECT_EQ(out.quadrics.size(), out.mesh.vertex_count());
+    double worst = 0;
+    for (const Vec3f& p : out.mesh.positions)
+      worst = std::max(worst, std::abs(n.dot(p.cast<double>() - origin)));
+    EXPECT_LT(worst, 1e-6 * diagonal) << representative_name(r);
+  }
+}
+
+TEST(Cluster, SphereRepresentativesLieOnTheSphere) {
+  const IndexedMesh sphere = test::sphere(6);  // 32768 triangles
+  ClusterStats stats;
+  const QuadricMesh quadric = run(sphere, grid_options(16), &stats);
+  const QuadricMesh mean = run(sphere, grid_options(16, Representative::mean));
+  ASSERT_GT(quadric.mesh.vertex_count(), 500u);
+  const double cell = stats.output_cell_size;
+  EXPECT_NEAR(cell, 2.0 / 16, 1e-6);
+  double worst = 0;
+  for (const Vec3f& p : quadric.mesh.positions)
+    worst = std::max(worst, std::abs(p.cast<double>().norm() - 1.0));
+  EXPECT_LT(worst, 0.05 * cell);
+  // As surfaces, the quadric's result is closer: the mean's vertices all sit inside the sphere, so its
+  // chords do too.
+  auto rms_to = [&](const IndexedMesh& out) {
+    double sum = 0;
+    std::size_t count = 0;
+    for (std::size_t v = 0; v < sphere.positions.size(); v += 11, ++count) {
+      const double d = distance_to_mesh(sphere.positions[v].cast<double>(), out);
+      sum += d * d;
+    }
+    return std::sqrt(sum / count);
+  };
+  EXPECT_LT(rms_to(quadric.mesh), 0.8 * rms_to(mean.mesh));
+  // A closed sphere clustered stays closed. Where four cells meet around a grid line, clustering may keep
+  // both diagonals of their quad (a known trait of vertex clustering); those few faces are the only ones
+  // whose edges disagree in direction.
+  const MeshTopology topology = analyze_topology(quadric.mesh);
+  EXPECT_EQ(topology.boundary_edges, 0u);
+  EXPECT_EQ(topology.degenerate_faces, 0u);
+  EXPECT_LT(topology.inconsistent_edges, topology.edges / 20);
+}
+
+TEST(Cluster, CubeStaysSharpWithQuadricPlacementAndRoundsWithMean) {
+  const IndexedMesh cube = test::cube(30);
+  auto distance_to_cube_surface = [](const Vec3f& p) {
+    // Inside or on the cube [0,1]^3: distance to the nearest face; outside: distance to the box.
+    const Vec3d q = p.cast<double>();
+    const Vec3d outside = (q - q.cwiseMax(Vec3d::Zero()).cwiseMin(Vec3d::Ones())).cwiseAbs();
+    if (outside.maxCoeff() > 0) return outside.norm();
+    return std::min(q.minCoeff(), (Vec3d::Ones() - q).minCoeff());
+  };
+  auto nearest_to_corners = [](const IndexedMesh& mesh) {
+    double worst = 0;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3f corner(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+      double best = 1e9;
+      for (const Vec3f& p : mesh.positions) best = std::min<double>(best, (p - corner).norm());
+      worst = std::max(worst, best);
+    }
+    return worst;
+  };
+  for (std::uint32_t grid : {7u, 10u}) {
+    const QuadricMesh sharp = run(cube, grid_options(grid));
+    const QuadricMesh round = run(cube, grid_options(grid, Representative::mean));
+    double sharp_worst = 0, round_worst = 0;
+    for (const Vec3f& p : sharp.mesh.positions)
+      sharp_worst = std::max(sharp_worst, distance_to_cube_surface(p));
+    for (const Vec3f& p : round.mesh.positions)
+      round_worst = std::max(round_worst, distance_to_cube_surface(p));
+    // Quadric placement: every vertex on the cube, the corners exactly there.
+    EXPECT_LT(sharp_worst, 1e-5) << grid;
+    EXPECT_LT(nearest_to_corners(sharp.mesh), 1e-5) << grid;
+    // Mean placement: vertices of edge and corner cells sink inside.
+    EXPECT_GT(round_worst, 0.1 / grid) << grid;
+    EXPECT_GT(nearest_to_corners(round.mesh), 0.2 / grid) << grid;
+  }
+}
+
+TEST(Cluster, OpenSquareBorderStaysInPlace) {
+  // In-plane rotation so that the border runs across cells, not along cell faces.
+  IndexedMesh square = test::grid_square(120);
+  const Eigen::Matrix3f spin = Eigen::AngleAxisf(0.35f, Vec3f::UnitZ()).toRotationMatrix();
+  for (Vec3f& p : square.positions) p = spin * p;
+  const std::vector<Index> border = border_vertices(square);
+  ASSERT_EQ(border.size(), 480u);
+  auto worst_border_gap = [&](const IndexedMesh& out) {
+    double worst = 0;
+    for (Index v : border) worst = std::max(worst, distance_to_mesh(square.positions[v].cast<double>(), out));
+    return worst;
+  };
+  ClusterOptions options = grid_options(12);
+  ClusterStats stats;
+  const QuadricMesh kept = run(square, options, &stats);
+  options.preserve_boundary = false;
+  const QuadricMesh shrunk = run(square, options);
+  const double cell = stats.output_cell_size;
+  // With the border planes the clustered square reaches the original border everywhere except where a
+  // corner's cell cuts it; without them, border vertices sit at their cells' means, half a cell in.
+  const double with_border = worst_border_gap(kept.mesh), without = worst_border_gap(shrunk.mesh);
+  EXPECT_LT(with_border, 0.02 * cell);
+  EXPECT_GT(without, 0.15 * cell);
+  // The four corners stay put.
+  for (const Vec3f& corner : {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0), Vec3f(1, 1, 0)}) {
+    const Vec3f c = spin * corner;
+    double best = 1e9;
+    for (const Vec3f& p : kept.mesh.positions) best = std::min<double>(best, (p - c).norm());
+    EXPECT_LT(best, 1e-3 * cell);
+  }
+  // Output quadrics are the surface's alone: z = 0 for every vertex's quadric minimizer direction.
+  for (const Quadric& q : kept.quadrics) {
+    EXPECT_NEAR(q.a00, 0.0, 1e-12);
+    EXPECT_NEAR(q.a11, 0.0, 1e-12);
+  }
+}
+
+TEST(Cluster, OctreeReturnsExactlyTheRequestedVertexCount) {
+  const IndexedMesh mesh = lumpy_sphere_with_holes();
+  for (std::uint64_t n : {1ull, 7ull, 100ull, 333ull, 1000ull}) {
+    ClusterOptions options;
+    options.octree = true;
+    options.target_vertices = n;
+    ClusterStats stats;
+    const QuadricMesh out = run(mesh, options, &stats);
+    EXPECT_EQ(out.mesh.vertex_count(), n);
+    EXPECT_EQ(out.quadrics.size(), n);
+    EXPECT_TRUE(stats.target_met);
+    EXPECT_GE(stats.fine_cells, n);
+  }
+}
+
+TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
+  const IndexedMesh mesh = lumpy_sphere_with_holes();
+  for (std::uint64_t faces : {200ull, 1500ull}) {
+    ClusterOptions options;
+    options.octree = true;
+    options.target_faces = faces;
+    ClusterStats stats;
+    const QuadricMesh out = run(mesh, options, &stats);
+    EXPECT_LE(out.mesh.face_count(), faces);
+    // Each merge removes only the few faces around one pair: the count lands just under the target.
+    EXPECT_GE(out.mesh.face_count(), faces - faces / 20 - 4);
+    EXPECT_TRUE(stats.target_met);
+  }
+}
+
+TEST(Cluster, OctreeBeatsTheUniformGridAtEqualVertexCount) {
+  // A box elongated along x with one bumpy end: flat cells should grow, bumpy ones stay small.
+  IndexedMesh mesh = test::sphere(6);
+  for (Vec3f& p : mesh.positions) {
+    p.x() *= 2.0f;
+    if (p.x() > 1.0f) p *= 1.0f + 0.05f * std::sin(20 * p.y()) * std::sin(20 * p.z());
+  }
+  const QuadricMesh uniform = run(mesh, grid_options(12));
+  ClusterOptions options;
+  options.octree = true;
+  options.target_vertices = uniform.mesh.vertex_count();
+  const QuadricMesh octree = run(mesh, options);
+  ASSERT_EQ(octree.mesh.vertex_count(), uniform.mesh.vertex_count());
+  // Error of the original's vertices against each result.
+  auto rms = [&](const IndexedMesh& out) {
+    double sum = 0;
+    std::size_t count = 0;
+    for (std::size_t v = 0; v < mesh.positions.size(); v += 7, ++count) {
+      const double d = distance_to_mesh(mesh.positions[v].cast<double>(), out);
+      sum += d * d;
+    }
+    return std::sqrt(sum / count);
+  };
+  EXPECT_LT(rms(octree.mesh), rms(uniform.mesh));
+}
+
+TEST(Cluster, UniformGridFaceTargetPicksItsResolution) {
+  const IndexedMesh mesh = test::sphere(6);
+  for (std::uint64_t target : {300ull, 2000ull}) {
+    ClusterOptions options;
+    options.target_faces = target;
+    ClusterStats stats;
+    const QuadricMesh out = run(mesh, options, &stats);
+    EXPECT_LE(out.mesh.face_count(), target);
+    // The resolution is searched continuously, so the count lands close under the target.
+    EXPECT_GE(out.mesh.face_count(), target * 9 / 10);
+    EXPECT_LT(stats.output_grid, stats.fine_grid);
+    EXPECT_TRUE(stats.target_met);
+    // Clustering directly at the chosen cell size gives about the same faces (fine cells join coarse ones
+    // by their centers, vertices by their positions).
+    ClusterOptions direct_options;
+    direct_options.cell_size = stats.output_cell_size;
+    const QuadricMesh direct = run(mesh, direct_options);
+    EXPECT_NEAR(static_cast<double>(direct.mesh.face_count()), static_cast<double>(out.mesh.face_count()),
+                0.2 * out.mesh.face_count());
+  }
+}
+
+TEST(Cluster, ThreadCountDoesNotChangeABit) {
+  IndexedMesh mesh = lumpy_sphere_with_holes();
+  mesh.colors.resize(mesh.positions.size());
+  mesh.normals.resize(mesh.positions.size());
+  for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+    mesh.colors[i] = {static_cast<std::uint8_t>(i * 7), static_cast<std::uint8_t>(i * 13), 50, 255};
+    mesh.normals[i] = mesh.positions[i].normalized();
+  }
+  std::vector<ClusterOptions> modes(4);
+  modes[0].grid = 20;
+  modes[1].representative = Representative::constrained;
+  modes[1].grid = 13;
+  modes[2].octree = true;
+  modes[2].target_vertices = 400;
+  modes[3].target_faces = 900;
+  for (bool soup : {false, true}) {
+    for (ClusterOptions options : modes) {
+      options.threads = 1;
+      const QuadricMesh one = run(mesh, options, nullptr, soup);
+      for (unsigned threads : {2u, 3u, 8u}) {
+        options.threads = threads;
+        const QuadricMesh many = run(mesh, options, nullptr, soup);
+        EXPECT_TRUE(same_bytes(one, many)) << threads << " threads, soup " << soup;
+      }
+    }
+  }
+}
+
+TEST(Cluster, ShufflingTrianglesChangesNothingButRounding) {
+  const IndexedMesh mesh = lumpy_sphere_with_holes();
+  IndexedMesh shuffled = mesh;
+  std::mt19937 random(5);
+  std::shuffle(shuffled.triangles.begin(), shuffled.triangles.end(), random);
+  // Rotate some triangles' corners too: same triangle, different first corner.
+  for (std::size_t i = 0; i < shuffled.triangles.size(); i += 3) {
+    Triangle& t = shuffled.triangles[i];
+    t = {t[1], t[2], t[0]};
+  }
+  for (Representative r : {Representative::quadric, Representative::mean}) {
+    const QuadricMesh a = run(mesh, grid_options(18, r)), b = run(shuffled, grid_options(18, r));
+    ASSERT_EQ(a.mesh.vertex_count(), b.mesh.vertex_count());
+    EXPECT_EQ(a.mesh.triangles, b.mesh.triangles);
+    double worst = 0;
+    for (std::size_t v = 0; v < a.mesh.vertex_count(); ++v) {
+      worst = std::max<double>(worst, (a.mesh.positions[v] - b.mesh.positions[v]).norm());
+    }
+    EXPECT_LT(worst, 1e-6) << representative_name(r);
+  }
+}
+
+TEST(Cluster, OutputQuadricsSumTheInputSurfaceQuadrics) {
+  const IndexedMesh mesh = tilted(lumpy_sphere_with_holes());
+  Quadric expected;
+  for (const Quadric& q : face_quadrics_per_vertex(mesh)) expected += q;
+  for (int mode = 0; mode < 2; ++mode) {
+    ClusterOptions options = grid_options(15);
+    if (mode == 1) {
+      options.octree = true;
+      options.target_vertices = 300;
+    }
+    const QuadricMesh out = run(mesh, options);
+    Quadric total;
+    for (const Quadric& q : out.quadrics) total += q;
+    const double scale = std::abs(expected.c) + std::abs(expected.a00);
+    for (double d :
+         {total.a00 - expected.a00, total.a12 - expected.a12, total.b1 - expected.b1, total.c - expected.c}) {
+      EXPECT_LT(std::abs(d), 1e-5 * scale);
+    }
+  }
+}
+
+TEST(Cluster, SoupAndIndexedInputAgree) {
+  const IndexedMesh mesh = tilted(test::sphere(5));
+  ClusterStats stats;
+  const QuadricMesh indexed = run(mesh, grid_options(14), &stats);
+  const QuadricMesh soup = run(mesh, grid_options(14), nullptr, true);
+  ASSERT_EQ(indexed.mesh.vertex_count(), soup.mesh.vertex_count());
+  EXPECT_EQ(indexed.mesh.triangles, soup.mesh.triangles);
+  // The same quadrics; only the solve's starting point differs (a soup averages corners, not vertices).
+  double worst = 0;
+  for (std::size_t v = 0; v < indexed.mesh.vertex_count(); ++v) {
+    worst = std::max<double>(worst, (indexed.mesh.positions[v] - soup.mesh.positions[v]).norm());
+  }
+  EXPECT_LT(worst, 0.05 * stats.output_cell_size);
+}
+
+TEST(Cluster, AttributesAreAveragedPerCell) {
+  IndexedMesh mesh = test::grid_square(40);
+  mesh.colors.assign(mesh.positions.size(), {10, 200, 30, 255});
+  mesh.uvs.resize(mesh.positions.size());
+  mesh.normals.assign(mesh.positions.size(), Vec3f(0, 0, 1));
+  for (std::size_t i = 0; i < mesh.positions.size(); ++i) mesh.uvs[i] = mesh.positions[i].head<2>();
+  const QuadricMesh out = run(mesh, grid_options(5));
+  ASSERT_EQ(out.mesh.colors.size(), out.mesh.vertex_count());
+  ASSERT_EQ(out.mesh.uvs.size(), out.mesh.vertex_count());
+  ASSERT_EQ(out.mesh.normals.size(), out.mesh.vertex_count());
+  for (std::size_t v = 0; v < out.mesh.vertex_count(); ++v) {
+    EXPECT_EQ(out.mesh.colors[v], (Color{10, 200, 30, 255}));
+    EXPECT_NEAR((out.mesh.normals[v] - Vec3f(0, 0, 1)).norm(), 0.0, 1e-6);
+    // uv = xy on the input, so the averaged uv is the mean of the cell's vertices: inside the cell.
+    const Vec2f uv = out.mesh.uvs[v];
+    const Vec2f cell = (uv * 5).array().floor();
+    EXPECT_GE(uv.x(), cell.x() / 5 - 1e-6);
+    EXPECT_LE(uv.x(), (cell.x() + 1) / 5 + 1e-6);
+  }
+}
+
+TEST(Cluster, DropsCollapsedAndRepeatedTriangles) {
+  const IndexedMesh mesh = test::sphere(5);
+  ClusterStats stats;
+  const QuadricMesh out = run(mesh, grid_options(8), &stats);
+  EXPECT_EQ(stats.input_triangles, mesh.face_count());
+  EXPECT_EQ(stats.collapsed_triangles + stats.duplicate_triangles + stats.output_faces, mesh.face_count());
+  const MeshTopology topology = analyze_topology(out.mesh);
+  EXPECT_EQ(topology.degenerate_faces, 0u);
+  EXPECT_EQ(topology.duplicate_faces, 0u);
+}
+
+TEST(Cluster, EmptyAndDegenerateInputs) {
+  EXPECT_EQ(run(IndexedMesh{}, grid_options(10)).mesh.vertex_count(), 0u);
+  IndexedMesh point;
+  point.positions = {{1, 2, 3}, {1, 2, 3}, {1, 2, 3}};
+  point.triangles = {{0, 1, 2}};
+  const QuadricMesh out = run(point, grid_options(10));
+  EXPECT_EQ(out.mesh.vertex_count(), 1u);
+  EXPECT_EQ(out.mesh.face_count(), 0u);
+  EXPECT_EQ(out.mesh.positions[0], Vec3f(1, 2, 3));
+}
+
+TEST(Cluster, RejectsBadInputAndImpossibleOptions) {
+  IndexedMesh bad = test::grid_square(4);
+  bad.triangles.push_back({0, 1, 999});
+  EXPECT_THROW(run(bad, grid_options(4)), Error);
+  IndexedMesh nan = test::grid_square(4);
+  nan.positions[3].x() = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(run(nan, grid_options(4)), Error);
+  ClusterOptions octree;
+  octree.octree = true;
+  EXPECT_THROW(run(test::grid_square(4), octree), Error);
+  ClusterOptions tiny;
+  tiny.cell_size = 1e-9;
+  EXPECT_THROW(run(test::grid_square(4), tiny), Error);
+  ClusterOptions zero;
+  zero.grid = 0;
+  EXPECT_THROW(run(test::grid_square(4), zero), Error);
+}
+
+TEST(Cluster, ClustersASharedMeshFromDisk) {
+  OCSIMP_REQUIRE_SHARED_MESH(path, "bunny.ply");
+  auto stream = open_triangle_stream(path);
+  const std::uint64_t faces = stream->triangles_hint();
+  ClusterStats stats;
+  const QuadricMesh out = cluster(*stream, grid_options(64), &stats);
+  EXPECT_EQ(stats.input_triangles, faces);
+  EXPECT_GT(out.mesh.face_count(), 1000u);
+  EXPECT_LT(out.mesh.face_count(), faces);
+  EXPECT_EQ(analyze_topology(out.mesh).degenerate_faces, 0u);
+}
+
+}  // namespace
+}  // namespace ocsimp

@@ -1,0 +1,165 @@
+// ocsimp cluster: streaming vertex clustering, one pass over the input.
+#include <tbb/global_control.h>
+
+#include <chrono>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <optional>
+
+#include "commands.h"
+#include "ocsimp/cluster/cluster.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+
+namespace ocsimp::cli {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+void add_cluster_command(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "cluster",
+      "Simplify by vertex clustering in one pass over the input (any size): a uniform grid or an adaptive "
+      "octree, vertices placed by quadric error, open borders kept");
+  struct Flags {
+    std::string input, output, report;
+    ClusterOptions options;
+    std::uint64_t faces = 0, vertices = 0;
+    bool no_boundary = false;
+    bool ascii = false;
+    bool quiet = false;
+  };
+  auto flags = std::make_shared<Flags>();
+  cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
+  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
+  auto* grid = cmd->add_option("--grid", flags->options.grid, "Uniform grid: cells along the longest axis")
+                   ->capture_default_str()
+                   ->check(CLI::Range(1u, 1u << 21));
+  auto* cell = cmd->add_option("--cell-size", flags->options.cell_size, "Uniform grid: edge length of a cell")
+                   ->check(CLI::PositiveNumber);
+  auto* faces = cmd->add_option("--faces", flags->faces,
+                                "Face budget: the largest face count not above it (octree: by merging; "
+                                "uniform grid: by choosing the resolution)")
+                    ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+  auto* octree =
+      cmd->add_flag("--octree", flags->options.octree, "Adaptive octree: needs --vertices or --faces");
+  auto* vertices = cmd->add_option("--vertices", flags->vertices, "Octree: exactly this many vertices")
+                       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+  grid->excludes(cell);
+  faces->excludes(grid)->excludes(cell);
+  vertices->excludes(faces)->excludes(grid)->excludes(cell)->needs(octree);
+  static const std::map<std::string, Representative> representatives = {
+      {"quadric", Representative::quadric},
+      {"constrained", Representative::constrained},
+      {"mean", Representative::mean}};
+  cmd->add_option(
+         "--representative", flags->options.representative,
+         "Where a cell puts its vertex: quadric (minimizer of the cell's quadric), constrained (that "
+         "minimizer kept inside the cell) or mean (average of the cell's vertices)")
+      ->transform(CLI::CheckedTransformer(representatives, CLI::ignore_case))
+      ->default_str("quadric");
+  cmd->add_flag("--no-boundary", flags->no_boundary, "Do not hold open borders in place");
+  cmd->add_option("--boundary-weight", flags->options.boundary_weight,
+                  "Weight of a border crossing against a cell's worth of surface")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--threads", flags->options.threads,
+                  "Threads (0 = all cores); the output does not depend on it")
+      ->capture_default_str()
+      ->check(CLI::Range(0u, 4096u));
+  cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON");
+  cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
+  cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");
+  cmd->callback([flags] {
+    const auto start = std::chrono::steady_clock::now();
+    format_from_extension(flags->output);  // refuse an unknown output format before reading anything
+    ClusterOptions options = flags->options;
+    options.preserve_boundary = !flags->no_boundary;
+    options.target_faces = flags->faces;
+    options.target_vertices = flags->vertices;
+    if (options.octree && flags->vertices == 0 && flags->faces == 0) {
+      throw Error("--octree needs --vertices N or --faces N");
+    }
+    std::optional<tbb::global_control> limit;
+    if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+    const ProgressFn progress = make_progress(flags->quiet);
+    options.progress = progress;
+
+    ReadOptions read;
+    read.progress = progress;
+    std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);
+    const double open_seconds = seconds_since(start);
+    ClusterStats stats;
+    const QuadricMesh result = cluster(*stream, options, &stats);
+    const std::uint64_t input_bytes = stream->bytes_total();
+    stream.reset();  // its vertex array is scratch now; free it before writing
+    const auto write_start = std::chrono::steady_clock::now();
+    WriteOptions write;
+    write.ascii = flags->ascii;
+    write.progress = progress;
+    write_mesh(flags->output, result.mesh, write);
+    const double write_seconds = seconds_since(write_start);
+    const double total_seconds = seconds_since(start);
+
+    if (!flags->report.empty()) {
+      nlohmann::json report;
+      report["input"] = {{"file", flags->input},
+                         {"bytes", input_bytes},
+                         {"vertices", stats.input_vertices},
+                         {"faces", stats.input_triangles}};
+      report["output"] = {{"file", flags->output},
+                          {"vertices", stats.output_vertices},
+                          {"faces", stats.output_faces},
+                          {"isolated_vertices", stats.isolated_vertices}};
+      report["options"] = {{"mode", options.octree ? "octree" : "grid"},
+                           {"grid", options.grid},
+                           {"cell_size", options.cell_size},
+                           {"target_faces", options.target_faces},
+                           {"target_vertices", options.target_vertices},
+                           {"representative", representative_name(options.representative)},
+                           {"boundary", options.preserve_boundary},
+                           {"boundary_weight", options.boundary_weight},
+                           {"threads", options.threads}};
+      report["cells"] = {{"fine", stats.fine_cells},
+                         {"fine_grid", stats.fine_grid},
+                         {"fine_cell_size", stats.fine_cell_size},
+                         {"output", stats.output_vertices},
+                         {"output_grid", stats.output_grid},
+                         {"output_cell_size", stats.output_cell_size}};
+      report["triangles"] = {{"in", stats.input_triangles},
+                             {"collapsed_in_fine_cells", stats.collapsed_triangles},
+                             {"repeated_fine_cells", stats.duplicate_triangles},
+                             {"out", stats.output_faces}};
+      report["target_met"] = stats.target_met;
+      report["seconds"] = {{"open", open_seconds},
+                           {"cluster", stats.seconds},
+                           {"write", write_seconds},
+                           {"total", total_seconds}};
+      report["triangles_per_second"] =
+          total_seconds > 0 ? static_cast<double>(stats.input_triangles) / total_seconds : 0.0;
+      report["peak_rss_bytes"] = peak_rss_bytes();
+      write_json_report(flags->report, report);
+    }
+    if (!stats.target_met) {
+      std::fprintf(stderr,
+                   "ocsimp: warning: the %s target was not reached (the finest grid has %llu cells)\n",
+                   flags->vertices ? "vertex" : "face", static_cast<unsigned long long>(stats.fine_cells));
+    }
+    if (!flags->quiet) {
+      std::printf(
+          "%s: %llu triangles -> %llu vertices, %llu faces (%llu fine cells) in %.2f s, peak RSS %s\n",
+          flags->input.c_str(), static_cast<unsigned long long>(stats.input_triangles),
+          static_cast<unsigned long long>(stats.output_vertices),
+          static_cast<unsigned long long>(stats.output_faces),
+          static_cast<unsigned long long>(stats.fine_cells), total_seconds,
+          format_bytes(peak_rss_bytes()).c_str());
+    }
+  });
+}
+
+}  // namespace ocsimp::cli
