@@ -1,0 +1,50 @@
+// The inside of DistanceIndex, shared by compare_index.cpp (building, querying, sampling) and compare.cpp
+// (measuring). Not a public header.
+#pragma once
+
+#include <embree3/rtcore.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "ocsimp/tools/compare.h"
+
+namespace ocsimp {
+
+struct DistanceIndex::Impl {
+  std::string name;
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  std::string device_error;  // the last message Embree reported, for exceptions
+
+  // The mesh, in the buffers Embree allocated for it (vertex buffers padded for its 16-byte loads).
+  const float* positions = nullptr;  // 3 a vertex
+  const Index* corners = nullptr;    // 3 a triangle
+  std::size_t vertex_count = 0;
+  std::size_t triangle_count = 0;
+
+  std::vector<double> cumulative_area;     // triangle_count + 1 entries, from 0 to the total area
+  std::size_t last_sampled_triangle = 0;   // the last triangle of positive area
+  std::vector<Index> referenced_vertices;  // ascending
+  Box3 bounds;
+  double coordinate_scale = 0;  // largest absolute coordinate: sizes the margin for Embree's float culling
+
+  Impl() = default;
+  Impl(const Impl&) = delete;
+  Impl& operator=(const Impl&) = delete;
+  ~Impl();
+
+  Vec3d vertex(Index v) const {
+    const float* p = positions + 3 * std::size_t{v};
+    return {double(p[0]), double(p[1]), double(p[2])};
+  }
+  double total_area() const { return cumulative_area.back(); }
+
+  // Area samples [first, last) of the `count` stratified samples drawn with `seed`, written to `out`.
+  void area_samples(std::size_t count, std::uint64_t seed, std::size_t first, std::size_t last,
+                    Vec3d* out) const;
+};
+
+}  // namespace ocsimp
