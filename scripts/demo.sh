@@ -11,7 +11,7 @@ echo "== generating a 2M-triangle scan-like mesh"
 $ocsimp gen -o out/scan-2m.ply --triangles 2000000 --seed 1
 $ocsimp info out/scan-2m.ply
 echo "== simplifying to 20,000 faces"
-$ocsimp decimate out/scan-2m.ply -o out/scan-20k.ply --faces 20000 --report out/scan-20k.json
+$ocsimp simplify out/scan-2m.ply -o out/scan-20k.ply --faces 20000 --report out/scan-20k.json
 $ocsimp info out/scan-20k.ply
 echo "== distance of the result to the original"
 $ocsimp compare out/scan-2m.ply out/scan-20k.ply

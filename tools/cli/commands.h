@@ -12,6 +12,11 @@ namespace ocsimp::cli {
 void add_info_command(CLI::App& app);
 void add_convert_command(CLI::App& app);
 void add_gen_command(CLI::App& app);
+void add_compare_command(CLI::App& app);
+void add_cluster_command(CLI::App& app);
+void add_decimate_command(CLI::App& app);
+void add_simplify_command(CLI::App& app);
+void add_bench_command(CLI::App& app);
 
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.

@@ -13,6 +13,11 @@ int main(int argc, char** argv) {
   ocsimp::cli::add_info_command(app);
   ocsimp::cli::add_convert_command(app);
   ocsimp::cli::add_gen_command(app);
+  ocsimp::cli::add_compare_command(app);
+  ocsimp::cli::add_cluster_command(app);
+  ocsimp::cli::add_decimate_command(app);
+  ocsimp::cli::add_simplify_command(app);
+  ocsimp::cli::add_bench_command(app);
   // New commands: add their registration above this line.
   try {
     app.parse(argc, argv);

@@ -224,7 +224,7 @@ class ScanSurface {
     const Vec3d t1 = (std::abs(d.x()) < 0.9 ? Vec3d::UnitX() : Vec3d::UnitY()).cross(d).normalized();
     const Vec3d t2 = d.cross(t1);
     const double h = 1e-5;
-    auto point = [&](const Vec3d& dir) { return radius(component, dir.normalized()) * dir.normalized(); };
+    auto point = [&](const Vec3d& dir) -> Vec3d { return radius(component, dir.normalized()) * dir.normalized(); };
     const Vec3d n = (point(d + h * t1) - point(d - h * t1)).cross(point(d + h * t2) - point(d - h * t2));
     return n.normalized();
   }

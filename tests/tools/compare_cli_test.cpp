@@ -1,0 +1,113 @@
+// `ocsimp compare` end to end: its numbers are the library's, repeat across thread counts, and bad input
+// fails with one line.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "ocsimp/streaming/io.h"
+#include "ocsimp/tools/compare.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+struct CompareRun {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+CompareRun run_ocsimp(const std::string& args, const test::TempDir& dir) {
+  const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string command =
+      std::string(OCSIMP_BINARY_DIR) + "/bin/ocsimp " + args + " >" + out + " 2>" + err;
+  const int status = std::system(command.c_str());
+  CompareRun r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  auto slurp = [](const std::string& path) {
+    std::ifstream in(path);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
+  test::TempDir dir;
+  const IndexedMesh original = test::sphere(4);
+  IndexedMesh simplified = test::sphere(2);
+  for (Vec3f& p : simplified.positions) p.x() += 0.01f;
+  write_mesh(dir / "original.ply", original);
+  write_mesh(dir / "simplified.ply", simplified);
+  const std::string args =
+      "compare --json --samples 30000 --seed 9 " + (dir / "original.ply") + " " + (dir / "simplified.ply");
+  const CompareRun one = run_ocsimp(args + " --threads 1", dir);
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const CompareRun two = run_ocsimp(args + " --threads 2", dir);
+  ASSERT_EQ(two.exit_code, 0) << two.err;
+  EXPECT_EQ(one.out, two.out);
+
+  CompareOptions options;
+  options.samples = 30000;
+  options.seed = 9;
+  const SurfaceDistance d =
+      measure_distance(read_mesh(dir / "original.ply"), read_mesh(dir / "simplified.ply"), options);
+  const nlohmann::json j = nlohmann::json::parse(one.out);
+  // JSON numbers round-trip doubles exactly.
+  EXPECT_EQ(j["hausdorff"].get<double>(), d.hausdorff);
+  EXPECT_EQ(j["mean"].get<double>(), d.mean);
+  EXPECT_EQ(j["rms"].get<double>(), d.rms);
+  EXPECT_EQ(j["diagonal"].get<double>(), d.diagonal);
+  EXPECT_EQ(j["forward"]["hausdorff"].get<double>(), d.forward.hausdorff);
+  EXPECT_EQ(j["forward"]["rms"].get<double>(), d.forward.rms);
+  EXPECT_EQ(j["backward"]["mean"].get<double>(), d.backward.mean);
+  EXPECT_EQ(j["backward"]["samples"].get<std::size_t>(), 30000u);
+  EXPECT_EQ(j["forward"]["vertex_samples"].get<std::size_t>(), original.vertex_count());
+  EXPECT_DOUBLE_EQ(j["rms_percent"].get<double>(), 100 * d.rms / d.diagonal);
+  EXPECT_GT(d.hausdorff, 0.01);  // the shift alone
+
+  const CompareRun table = run_ocsimp(
+      "compare -q --samples 30000 --seed 9 " + (dir / "original.ply") + " " + (dir / "simplified.ply"), dir);
+  ASSERT_EQ(table.exit_code, 0) << table.err;
+  for (const char* row : {"forward", "backward", "symmetric", "Hausdorff", "RMS"})
+    EXPECT_NE(table.out.find(row), std::string::npos) << row;
+}
+
+TEST(CompareCli, HelpShowsDefaultsAndBadInputFailsWithOneLine) {
+  test::TempDir dir;
+  const CompareRun help = run_ocsimp("compare --help", dir);
+  EXPECT_EQ(help.exit_code, 0);
+  for (const char* text : {"--samples", "1000000", "--seed", "--json", "--no-vertices", "--threads"})
+    EXPECT_NE(help.out.find(text), std::string::npos) << text;
+
+  write_mesh(dir / "square.ply", test::grid_square(2));
+  const CompareRun unknown =
+      run_ocsimp("compare --no-such-flag " + (dir / "square.ply") + " " + (dir / "square.ply"), dir);
+  EXPECT_EQ(unknown.exit_code, 2);
+
+  const CompareRun missing = run_ocsimp("compare " + (dir / "square.ply") + " " + (dir / "nope.ply"), dir);
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("nope.ply"), std::string::npos);
+  EXPECT_EQ(std::count(missing.err.begin(), missing.err.end(), '\n'), 1) << missing.err;
+
+  // A mesh with vertices and no faces reads fine but has no surface to measure.
+  std::ofstream(dir / "points.ply")
+      << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+         "property float z\nelement face 0\nproperty list uchar int vertex_indices\n"
+         "end_header\n0 0 0\n1 0 0\n0 1 0\n";
+  const CompareRun empty = run_ocsimp("compare " + (dir / "square.ply") + " " + (dir / "points.ply"), dir);
+  EXPECT_EQ(empty.exit_code, 2);
+  EXPECT_NE(empty.err.find("points.ply"), std::string::npos) << empty.err;
+  EXPECT_EQ(std::count(empty.err.begin(), empty.err.end(), '\n'), 1) << empty.err;
+}
+
+}  // namespace
+}  // namespace ocsimp

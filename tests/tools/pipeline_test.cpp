@@ -1,0 +1,128 @@
+#include "ocsimp/tools/pipeline.h"
+
+#include <gtest/gtest.h>
+
+#include "ocsimp/cluster/cluster.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/decimate/decimate.h"
+#include "ocsimp/streaming/io.h"
+#include "ocsimp/streaming/mesh_stream.h"
+#include "ocsimp/tools/compare.h"
+#include "ocsimp/tools/generate.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+std::string write_scan(const test::TempDir& dir, std::uint64_t triangles, int holes = 0) {
+  GenerateOptions options;
+  options.triangles = triangles;
+  options.seed = 5;
+  options.holes = holes;
+  const std::string path = dir / "scan.ply";
+  generate_scan_ply(path, options);
+  return path;
+}
+
+TEST(Pipeline, InCoreReachesTheExactCount) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);  // open borders: any count is reachable
+  SimplifyOptions options;
+  options.target_faces = 5'001;
+  const SimplifyResult result = simplify(path, options);
+  EXPECT_FALSE(result.clustered);
+  EXPECT_EQ(result.mesh.face_count(), 5'001u);
+  EXPECT_TRUE(result.decimate.target_reached);
+}
+
+TEST(Pipeline, TwoStageReachesTheExactCountAndRecordsPhases) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);
+  SimplifyOptions options;
+  options.target_faces = 3'000;
+  options.two_stage = true;
+  options.intermediate = 4;
+  const SimplifyResult result = simplify(path, options);
+  EXPECT_TRUE(result.clustered);
+  EXPECT_EQ(result.mesh.face_count(), 3'000u);
+  EXPECT_GT(result.intermediate_faces, 3'000u);
+  EXPECT_LE(result.intermediate_faces, 4u * 3'000u);
+  ASSERT_GE(result.phases.size(), 2u);
+  EXPECT_EQ(result.phases[result.phases.size() - 2].name, "cluster");
+  EXPECT_EQ(result.phases.back().name, "decimate");
+  EXPECT_EQ(result.phases.back().triangles_out, 3'000u);
+}
+
+TEST(Pipeline, NeverAboveTheTarget) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 30'000);  // closed: faces stay even
+  SimplifyOptions options;
+  options.target_faces = 2'001;
+  options.two_stage = true;
+  const SimplifyResult result = simplify(path, options);
+  // The clustered intermediate need not be a closed manifold, so 2,001 may be reachable; above never.
+  EXPECT_LE(result.mesh.face_count(), 2'001u);
+  EXPECT_GE(result.mesh.face_count(), 2'000u);
+}
+
+TEST(Pipeline, RatioIsOfTheInputFaces) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 40'000, 1);
+  SimplifyOptions options;
+  options.target_ratio = 0.05;
+  const SimplifyResult in_core = simplify(path, options);
+  options.two_stage = true;
+  const SimplifyResult two_stage = simplify(path, options);
+  const auto expected = static_cast<std::size_t>(std::llround(0.05 * static_cast<double>(in_core.input_faces)));
+  EXPECT_EQ(in_core.mesh.face_count(), expected);
+  EXPECT_EQ(two_stage.mesh.face_count(), expected);
+}
+
+TEST(Pipeline, CarriedQuadricsBeatQuadricsRebuiltFromTheIntermediate) {
+  // The point of Garland & Shaffer: the decimator's costs measure distance to the original only if the
+  // cluster quadrics come along. Here mean-placed clusters round a cube's edges; quadrics rebuilt from that
+  // intermediate take the rounding for the truth, while the carried ones still hold the cube's six planes, so
+  // the decimator puts the corners back where they were.
+  const IndexedMesh original = test::cube(40);
+  ClusterOptions cluster_options;
+  cluster_options.grid = 12;
+  cluster_options.representative = Representative::mean;
+  auto stream = make_mesh_stream(original);
+  const QuadricMesh intermediate = cluster(*stream, cluster_options);
+  ASSERT_EQ(intermediate.quadrics.size(), intermediate.mesh.vertex_count());
+
+  DecimateOptions decimate_options;
+  decimate_options.target_faces = 60;
+  const IndexedMesh carried = decimate(intermediate, decimate_options).mesh;
+  QuadricMesh rebuilt = intermediate;
+  rebuilt.quadrics.clear();
+  const IndexedMesh forgotten = decimate(std::move(rebuilt), decimate_options).mesh;
+
+  CompareOptions compare;
+  compare.samples = 100'000;
+  const SurfaceDistance carried_distance = measure_distance(original, carried, compare);
+  const SurfaceDistance forgotten_distance = measure_distance(original, forgotten, compare);
+  EXPECT_LT(carried_distance.rms, 0.5 * forgotten_distance.rms);
+  EXPECT_LT(carried_distance.hausdorff, forgotten_distance.hausdorff);
+  // With the planes carried, the vertices that collapses placed lie on the cube's surface again (a vertex
+  // no collapse touched keeps its rounded, mean-placed position).
+  std::size_t on_surface = 0;
+  for (const Vec3f& p : carried.positions) {
+    const float gap = std::min({std::abs(p.x()), std::abs(p.y()), std::abs(p.z()), std::abs(1 - p.x()),
+                                std::abs(1 - p.y()), std::abs(1 - p.z())});
+    on_surface += gap < 1e-4f;
+  }
+  EXPECT_GE(on_surface, carried.vertex_count() * 8 / 10);
+}
+
+TEST(Pipeline, RefusesMissingTargetsAndBadFiles) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 5'000);
+  EXPECT_THROW(simplify(path, SimplifyOptions{}), Error);
+  SimplifyOptions options;
+  options.target_faces = 100;
+  EXPECT_THROW(simplify(dir / "missing.ply", options), Error);
+}
+
+}  // namespace
+}  // namespace ocsimp
