@@ -145,13 +145,14 @@ IndexedMesh read_mesh(TriangleStream& source) {
   IndexedMesh mesh;
   TriangleBatch batch;
   if (stream->indexed()) {
-    // The stream is consumed here, so its vertex array can be taken rather than copied.
-    mesh = std::move(stream->scratch_vertices());
     // The header's count is only a hint: reserve no more than the file's size could hold (8 bytes is the
     // shortest face record of any format), and grow past it only as the data proves itself.
-    mesh.triangles.reserve(std::min<std::uint64_t>(stream->triangles_hint(), stream->bytes_total() / 8));
-    while (stream->next(batch))
-      mesh.triangles.insert(mesh.triangles.end(), batch.triangles.begin(), batch.triangles.end());
+    std::vector<Triangle> triangles;
+    triangles.reserve(std::min<std::uint64_t>(stream->triangles_hint(), stream->bytes_total() / 8));
+    while (stream->next(batch)) triangles.insert(triangles.end(), batch.triangles.begin(), batch.triangles.end());
+    // The stream is exhausted, so its vertex array can be taken rather than copied.
+    mesh = std::move(stream->scratch_vertices());
+    mesh.triangles = std::move(triangles);
   } else {
     std::unordered_map<PositionKey, Index, PositionKeyHash> index_of;
     while (stream->next(batch)) {
