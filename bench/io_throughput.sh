@@ -33,6 +33,8 @@ else
   generator="bench_io_throughput gen (wavy torus)"
 fi
 "$BENCH" write "$BINARY" "$ASCII" --ascii >/dev/null
+OBJ=$WORK/mesh.obj
+"$BENCH" write "$BINARY" "$OBJ" >/dev/null
 echo "inputs: $generator, $(head -c 400 "$BINARY" | grep -a '^element face' | cut -d' ' -f3) faces; $RUNS runs each; medians"
 
 now_ns() { date +%s%N; }
@@ -77,5 +79,7 @@ run_case "binary read_mesh" "$BINARY" 0 "$BENCH" read "$BINARY"
 run_case "binary drain stream" "$BINARY" 0 "$BENCH" drain "$BINARY"
 run_case "ascii read_mesh" "$ASCII" 0 "$BENCH" read "$ASCII"
 run_case "ascii drain stream" "$ASCII" 0 "$BENCH" drain "$ASCII"
+run_case "obj read_mesh" "$OBJ" 0 "$BENCH" read "$OBJ"
+run_case "obj drain stream" "$OBJ" 0 "$BENCH" drain "$OBJ"
 run_case "binary write_mesh" "$BINARY" 1 "$BENCH" write "$BINARY" "$WORK/out.ply"
 run_case "ascii write_mesh" "$ASCII" 1 "$BENCH" write "$BINARY" "$WORK/out.ply" --ascii
