@@ -4,15 +4,16 @@
 // uniform grid at equal vertex count. Distances are two-sided (tools/compare.h: area-uniform samples both
 // ways plus vertices, exact closest points), as % of the original's bounding-box diagonal.
 //
-//   cluster_quality [--ratios 0.1,0.02,0.005] [--samples N] [--runs N] [--threads N] [--fine CELLS_PER_TARGET]
-//                   [--generate NAME=TRIANGLES] NAME=MESH_FILE...
+//   cluster_quality [--ratios 0.1,0.02,0.005] [--samples N] [--runs N] [--threads N]
+//                   [--fine CELLS_PER_TARGET] [--generate NAME=TRIANGLES] NAME=MESH_FILE...
 //
-// For each mesh and ratio: ocsimp's quadric grid goes first with ratio x faces as its budget (`--faces`: the
-// largest count not above it, the resolution searched continuously); meshopt_simplifySloppy (error limit off)
-// then aims at the face count the grid reached, so the two compare at (nearly) equal face counts, sloppy's at
-// or below ours. Mean and constrained reuse the quadric grid's cell size (same cells, about the same faces).
-// The octree gets the quadric grid's vertex count. Seconds: median of --runs calls of the simplification
-// alone (ocsimp: cluster() on an in-memory stream, threads as given).
+// For each mesh and ratio: ocsimp's grid first finds, with ratio x faces as its budget (`--faces`: the
+// resolution whose face count is the largest not above it, re-clustering fine cells), a cell size; "grid
+// quadric" clusters the input directly at that cell size (a true uniform grid), "grid quadric --faces" is the
+// budgeted run itself. meshopt_simplifySloppy (error limit off) then aims at the face count "grid quadric"
+// reached, so the two compare at (nearly) equal face counts, sloppy's at or below ours. Mean and constrained
+// use the same cell size (same cells, same faces); the octree gets the grid's vertex count. Seconds: the
+// median of --runs calls of the simplification alone (ocsimp: cluster() on an in-memory stream).
 #include <meshoptimizer.h>
 
 #include <algorithm>
@@ -172,10 +173,17 @@ int main(int argc, char** argv) {
       options.threads = threads;
       options.target_faces = target;
       options.fine_cells_per_target = fine;
-      const Result quadric = run_cluster(original, options, runs);
+      const Result searched = run_cluster(original, options, runs);
+      // The resolution the face budget led to, clustered directly: a true uniform grid (the search itself
+      // regroups fine cells, whose edges only approximate the coarse grid's).
+      ocsimp::ClusterOptions direct;
+      direct.threads = threads;
+      direct.cell_size = searched.stats.output_cell_size;
+      const Result quadric = run_cluster(original, direct, runs);
       const Result sloppy = run_sloppy(original, std::max<std::size_t>(1, quadric.mesh.face_count()), runs);
       const Row sloppy_row = add("meshopt sloppy", sloppy);
       const Row quadric_row = add("ocsimp grid quadric", quadric);
+      add("ocsimp grid quadric --faces", searched);
 
       ocsimp::ClusterOptions same_grid;
       same_grid.threads = threads;

@@ -1,17 +1,19 @@
 // The single pass over the input.
 //
-// Parallel scheme: thread t owns a fixed set of cells (indexed input: a contiguous range of the
-// Morton-ordered cell numbers; soups: the cells of blocks hashed to t). Every thread reads every triangle of
-// a batch and adds its contributions to the cells it owns, so a cell's sums are taken in input order whatever
-// the thread count and the output is the same bytes for 1 or N threads. The price is reading each triangle's
-// corners once per thread; the quadric and the cell updates, which dominate, are done once. No per-thread
-// copies of the cells exist, which keeps memory at one set of cells.
+// Parallel scheme: the cells are split among owners (indexed input: runs of the Morton-ordered cell numbers,
+// a few owners per thread so that TBB can balance them; soups: blocks of cells hashed to one owner per
+// thread). An owner adds contributions to its own cells only, in input order, so every cell's sums are
+// taken in the same order whatever the thread count and the output is the same bytes for 1 or N threads -
+// which the "chunks merged in chunk order" would also give, but at the price of one partial copy of
+// the cells per chunk in flight. Here no per-thread copies exist: memory stays at one set of cells. A
+// triangle whose corners belong to two owners is computed by both (identically); that is a few per cent.
 //
 // Indexed input: the vertex array is visited first. Each vertex's cell is resolved once (a hash lookup per
 // vertex instead of per corner: the lookups are what this stage spends its time on) and written back into
 // the vertex's own 12 bytes together with its position inside the cell, quantized to 2^-21 of a cell per
 // axis - finer than the float input itself for any grid of 4 or more cells. The face loop then reaches a
 // corner's cell by index, with no hashing, and rebuilds the corner's position from the cell and the offset.
+// Each batch's corners are gathered once, in parallel, and its triangles listed per owner.
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -95,28 +97,54 @@ void release_pages(const void* begin, const void* end) {
 
 // ---- Cell sums ------------------------------------------------------------------------------------------
 
+// What the face loop adds to per cell, in one record of two cache lines: a triangle that touches a cell
+// updates its quadric and, if it crosses a cell face, its border planes, and separate arrays would cost
+// separate cache misses.
+struct alignas(64) CellRecord {
+  Quadric quadric;
+  BorderSums border;
+};
+static_assert(sizeof(CellRecord) == 128, "a cell record is two cache lines");
+
 // The sums one owner adds to; indexed input has one shared store (owners touch disjoint cells), soups one
 // store per owner.
 struct CellStore {
-  std::vector<Quadric> quadrics;
-  std::vector<BorderSums> border;
-  std::vector<std::uint8_t> touched;
+  std::vector<CellRecord> records;
   ZeroedVector<std::uint32_t> points;
   ZeroedVector<Vec3f> point_sum;
 
-  void resize(std::size_t n, bool with_border) {
-    quadrics.resize(n);
-    if (with_border) border.resize(n);
-    touched.resize(n, 0);
-    points.resize(n, 0);
-    point_sum.resize(n, Vec3f::Zero());
+  Quadric& quadric(std::uint32_t i) { return records[i].quadric; }
+  BorderSums& border(std::uint32_t i) { return records[i].border; }
+  // Marks the cell as touched by a triangle, after its contribution is added. A touched cell's quadric has a
+  // positive trace (every proper triangle adds its area to it); one touched only by zero-area triangles
+  // carries the mark in the sign of its zero constant term instead of a byte of its own.
+  void touch(std::uint32_t i) {
+    Quadric& q = records[i].quadric;
+    if (!(q.a00 + q.a11 + q.a22 > 0.0)) q.c = -0.0;
   }
-  void push_back(bool with_border) {
-    quadrics.emplace_back();
-    if (with_border) border.emplace_back();
-    touched.push_back(0);
+  static bool touched(const Quadric& q) { return q.a00 + q.a11 + q.a22 > 0.0 || std::signbit(q.c); }
+
+  void push_back() {
+    records.emplace_back();
     points.push_back(0);
     point_sum.emplace_back(Vec3f::Zero());
+  }
+  // Hands the sums over to `cells` in its layout (arrays per field).
+  void move_into(FineCells& cells, bool with_border) {
+    const std::size_t n = records.size();
+    cells.quadrics.resize(n);
+    if (with_border) cells.border.resize(n);
+    cells.touched.resize(n);
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+      Quadric& q = records[i].quadric;
+      cells.touched[i] = touched(q) ? 1 : 0;
+      if (q.c == 0.0) q.c = 0.0;  // drops the mark's sign
+      cells.quadrics[i] = q;
+      if (with_border) cells.border[i] = records[i].border;
+    });
+    records = {};
+    cells.points = std::move(points);
+    cells.point_sum = std::move(point_sum);
   }
 };
 
@@ -194,8 +222,8 @@ void contribute(const Facet& f, CellStore& store, const Grid& grid, bool boundar
     int multiplicity = 1;
     for (int j = k + 1; j < 3; ++j) multiplicity += f.key[j] == f.key[k];
     const std::uint32_t i = f.index[k];
-    if (proper) q.add_to(store.quadrics[i], multiplicity);
-    store.touched[i] = 1;
+    if (proper) q.add_to(store.quadric(i), multiplicity);
+    store.touch(i);
   }
   if (!boundary || !proper) return;
   const Vec3d n = f.cross * f.inverse_length;
@@ -213,19 +241,19 @@ void contribute(const Facet& f, CellStore& store, const Grid& grid, bool boundar
     const int slot = dominant_axis(e);
     const Vec3f mf = m.cast<float>();
     if (f.own & (1u << a)) {
-      std::array<float, 4>& s = store.border[f.index[a]].slot[slot];
+      std::array<float, 4>& s = store.border(f.index[a]).slot[slot];
       s[0] += mf.x(), s[1] += mf.y(), s[2] += mf.z();
       s[3] += static_cast<float>(-m.dot(f.local[a] + half));
     }
     if (f.own & (1u << b)) {
-      std::array<float, 4>& s = store.border[f.index[b]].slot[slot];
+      std::array<float, 4>& s = store.border(f.index[b]).slot[slot];
       s[0] += mf.x(), s[1] += mf.y(), s[2] += mf.z();
       s[3] += static_cast<float>(-m.dot(f.local[b] - half));
     }
   }
 }
 
-constexpr int kFacetBlock = 32;
+constexpr unsigned kOwnersPerThread = 4;
 
 // One owner's surviving triangles: appended as they come (a hash set would cost a cache miss per triangle
 // in the face loop), sorted and merged whenever the log fills, so memory stays proportional to the distinct
@@ -337,13 +365,24 @@ class RecentCells {
 // up in one thread's share, which stops the count early.
 bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions, const Grid& grid,
                     std::size_t cap, std::vector<std::uint64_t>& codes) {
-  tbb::enumerable_thread_specific<KeySet> sets;
+  // Each task dedupes its range of vertices in a small set that stays in cache, then hands the range's
+  // Morton codes to its thread's list; a thread sorts and dedupes its list whenever it doubles. One big set
+  // instead would cost a cache miss per new run of vertices.
+  struct Found {
+    std::vector<std::uint64_t> codes;
+    std::size_t compact_at = std::size_t{1} << 20;
+  };
+  tbb::enumerable_thread_specific<Found> found;
   std::atomic<bool> over{false};
   std::atomic<std::size_t> first_bad{positions.size()};
+  auto compact = [](std::vector<std::uint64_t>& v) {
+    std::sort(v.begin(), v.end());
+    v.erase(std::unique(v.begin(), v.end()), v.end());
+  };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 1 << 18),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       if (over.load(std::memory_order_relaxed)) return;
-                      KeySet& set = sets.local();
+                      KeySet set(std::size_t{1} << 13);
                       RecentCells recent;
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const Vec3d p = positions[i].cast<double>();
@@ -359,23 +398,29 @@ bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions
                           recent.remember(key, 0);
                         }
                       }
-                      if (cap && set.size() > cap) over = true;
+                      Found& mine = found.local();
+                      set.for_each([&](CellKey key) { mine.codes.push_back(morton(key)); });
+                      if (mine.codes.size() >= mine.compact_at) {
+                        compact(mine.codes);
+                        mine.compact_at = std::max(mine.compact_at, 2 * mine.codes.size());
+                        if (cap && mine.codes.size() > cap) over = true;
+                      }
                     });
   if (first_bad.load() < positions.size()) {
     throw Error(path, {}, "vertex " + std::to_string(first_bad.load()) + " has a non-finite coordinate");
   }
   if (over) return false;
   std::size_t total = 0;
-  for (const KeySet& set : sets) total += set.size();
+  for (const Found& f : found) total += f.codes.size();
   codes.clear();
   codes.reserve(total);
-  for (KeySet& set : sets) {
-    set.for_each([&](CellKey key) { codes.push_back(morton(key)); });
-    set.clear();
+  for (Found& f : found) {
+    codes.insert(codes.end(), f.codes.begin(), f.codes.end());
+    f.codes = {};
   }
   tbb::parallel_sort(codes.begin(), codes.end());
   codes.erase(std::unique(codes.begin(), codes.end()), codes.end());
-  return true;
+  return !(cap && codes.size() > cap);
 }
 
 // Picks the grid (for target-driven modes, the power-of-two level) and returns its cells' Morton codes.
@@ -471,7 +516,9 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   IndexedMesh& vertices = stream.scratch_vertices();
   std::vector<Vec3f>& positions = vertices.positions;
   const std::size_t vertex_count = positions.size();
-  const unsigned owners = std::max(1u, options.threads);
+  // More owners than threads: TBB then balances the owners' uneven shares (and the reader's task) over the
+  // threads. Any number of owners gives the same sums, each cell's taken in input order.
+  const unsigned owners = std::max(1u, options.threads) * kOwnersPerThread;
   const Box3 bounds = stream.bounds();
 
   FineCells cells;
@@ -520,9 +567,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
 #endif
   // Face pass. Owners hold equal runs of the Morton-ordered cells: about equal shares of the surface.
   CellStore store;
-  store.quadrics.resize(count);
-  if (options.boundary) store.border.resize(count);
-  store.touched.assign(count, 0);
+  store.records.resize(count);
   std::vector<std::uint32_t> owner_bounds(owners + 1);
   for (unsigned t = 0; t <= owners; ++t) owner_bounds[t] = static_cast<std::uint32_t>(count * t / owners);
   // About two distinct triangles per cell on a closed surface; repeats are few when cells are much larger
@@ -539,43 +584,69 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     std::uint32_t cell[3];
   };
   std::vector<Gathered> gathered;
+  // Each gathered triangle is listed for the owners of its corners' cells, per fixed slice of the batch, so
+  // an owner visits only its own triangles, in input order.
+  constexpr std::size_t kSlices = 32;
+  std::vector<std::vector<std::uint32_t>> listed(kSlices * owners);
+  auto owner_of = [&](std::uint32_t cell) {
+    return static_cast<unsigned>(std::upper_bound(owner_bounds.begin() + 1, owner_bounds.end() - 1, cell) -
+                                 (owner_bounds.begin() + 1));
+  };
   auto gather = [&](const TriangleBatch& batch) {
     if (!batch.corners.empty()) throw Error(path, {}, "an indexed stream delivered a triangle soup batch");
-    gathered.resize(batch.triangles.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, batch.triangles.size(), 8192),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                          const Triangle& t = batch.triangles[i];
-                          Gathered& g = gathered[i];
-                          for (int k = 0; k < 3; ++k) {
-                            if (t[k] >= vertex_count) {
-                              throw Error(path, {},
-                                          "a triangle refers to vertex " + std::to_string(t[k]) + " of " +
-                                              std::to_string(vertex_count));
-                            }
-                            unpack(packed[t[k]], g.cell[k], g.q[k]);
-                          }
-                        }
-                      });
+    const std::size_t n = batch.triangles.size();
+    gathered.resize(n);
+    const std::size_t slice = (n + kSlices - 1) / kSlices;
+    tbb::parallel_for(std::size_t{0}, kSlices, [&](std::size_t s) {
+      for (unsigned t = 0; t < owners; ++t) listed[s * owners + t].clear();
+      for (std::size_t i = s * slice; i < std::min(n, (s + 1) * slice); ++i) {
+        const Triangle& t = batch.triangles[i];
+        Gathered& g = gathered[i];
+        for (int k = 0; k < 3; ++k) {
+          if (t[k] >= vertex_count) {
+            throw Error(path, {},
+                        "a triangle refers to vertex " + std::to_string(t[k]) + " of " +
+                            std::to_string(vertex_count));
+          }
+          unpack(packed[t[k]], g.cell[k], g.q[k]);
+        }
+        const unsigned o0 = owner_of(g.cell[0]), o1 = owner_of(g.cell[1]), o2 = owner_of(g.cell[2]);
+        const auto index = static_cast<std::uint32_t>(i);
+        listed[s * owners + o0].push_back(index);
+        if (o1 != o0) listed[s * owners + o1].push_back(index);
+        if (o2 != o0 && o2 != o1) listed[s * owners + o2].push_back(index);
+      }
+    });
   };
   cells.input_triangles =
       run_batches(stream, owners, options.progress, gather, [&](const TriangleBatch&, unsigned owner) {
         const std::uint32_t lo = owner_bounds[owner], span = owner_bounds[owner + 1] - lo;
         TriangleBuffer::Cursor& cursor = cursors[owner];
         std::uint64_t survived = 0;
-        Facet facets[kFacetBlock];
-        for (std::size_t base = 0; base < gathered.size(); base += kFacetBlock) {
-          const std::size_t end = std::min(gathered.size(), base + kFacetBlock);
-          int n = 0;
-          for (std::size_t i = base; i < end; ++i) {
+        // Each triangle's contributions are added before the next triangle's: a cell's sums then run in
+        // input order whatever the owners are.
+        for (std::size_t s = 0; s < kSlices; ++s) {
+          for (const std::uint32_t i : listed[s * owners + owner]) {
             const Gathered& g = gathered[i];
             const std::uint32_t(&cell)[3] = g.cell;
-            const unsigned own = static_cast<unsigned>(cell[0] - lo < span) |
-                                 static_cast<unsigned>(cell[1] - lo < span) << 1 |
-                                 static_cast<unsigned>(cell[2] - lo < span) << 2;
-            if (!own) continue;
-            Facet& f = facets[n++];
-            f.own = own;
+            if (cell[0] == cell[1] && cell[1] == cell[2]) {
+              // Most triangles lie inside one cell: one key, no border crossing, no survivor. In cell units
+              // the corners are small numbers: the cross product loses nothing to cancellation.
+              const Vec3d l0 = dequantize(g.q[0]);
+              const Vec3d cross =
+                  (grid.cell * grid.cell) * (dequantize(g.q[1]) - l0).cross(dequantize(g.q[2]) - l0);
+              const double squared = cross.squaredNorm();
+              if (squared > 0.0 && squared <= std::numeric_limits<double>::max()) {
+                const double offset = -cross.dot(grid.cell_origin(cells.keys[cell[0]]) + grid.cell * l0);
+                TriangleQuadric(cross, offset, 0.5 / std::sqrt(squared)).add_to(store.quadric(cell[0]), 3);
+              }
+              store.touch(cell[0]);
+              continue;
+            }
+            Facet f;
+            f.own = static_cast<unsigned>(cell[0] - lo < span) |
+                    static_cast<unsigned>(cell[1] - lo < span) << 1 |
+                    static_cast<unsigned>(cell[2] - lo < span) << 2;
             for (int k = 0; k < 3; ++k) {
               f.index[k] = cell[k];
               f.key[k] = cells.keys[cell[k]];
@@ -583,6 +654,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
               f.p[k] = grid.cell_origin(f.key[k]) + grid.cell * f.local[k];
             }
             f.set_normal();
+            set_inverse_lengths(&f, 1);
+            contribute(f, store, grid, options.boundary);
             if (cell[0] != cell[1] && cell[1] != cell[2] && cell[2] != cell[0]) {
               const std::uint32_t first = std::min(cell[0], std::min(cell[1], cell[2]));
               if (first - lo < span) {
@@ -591,8 +664,6 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
               }
             }
           }
-          set_inverse_lengths(facets, n);
-          for (int j = 0; j < n; ++j) contribute(facets[j], store, grid, options.boundary);
         }
         survivors[owner] += survived;
       });
@@ -611,11 +682,15 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   if (normals) cells.normal_sum.assign(count, Vec3f::Zero());
   if (colors) cells.color_sum.assign(count, {0, 0, 0, 0});
   if (uvs) cells.uv_sum.assign(count, Vec2d::Zero());
+  const unsigned threads = std::max(1u, options.threads);
+  std::vector<std::uint32_t> vertex_bounds(threads + 1);
+  for (unsigned t = 0; t <= threads; ++t) vertex_bounds[t] = static_cast<std::uint32_t>(count * t / threads);
   constexpr std::size_t kChunk = 1 << 20;
   for (std::size_t start = 0; start < vertex_count; start += kChunk) {
     const std::size_t end = std::min(vertex_count, start + kChunk);
-    tbb::parallel_for(0u, owners, [&](unsigned owner) {
-      const std::uint32_t lo = owner_bounds[owner], span = owner_bounds[owner + 1] - lo;
+    // One owner per thread here: every owner reads every vertex of the chunk.
+    tbb::parallel_for(0u, threads, [&](unsigned owner) {
+      const std::uint32_t lo = vertex_bounds[owner], span = vertex_bounds[owner + 1] - lo;
       for (std::size_t v = start; v < end; ++v) {
         std::uint32_t cell;
         std::uint64_t q;
@@ -642,11 +717,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // The stream is exhausted: its vertex array (the largest block of memory in play) is no longer needed.
   vertices = IndexedMesh();
 
-  cells.quadrics = std::move(store.quadrics);
-  cells.border = std::move(store.border);
-  cells.touched = std::move(store.touched);
-  cells.points = std::move(store.points);
-  cells.point_sum = std::move(store.point_sum);
+  store.move_into(cells, options.boundary);
   return cells;
 }
 
@@ -708,7 +779,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
             if (inserted) {
               check_cell_count(me.keys.size() + 1);
               me.keys.push_back(f.key[k]);
-              me.store.push_back(options.boundary);
+              me.store.push_back();
             }
             if (me.store.points[i] != std::numeric_limits<std::uint32_t>::max()) {
               ++me.store.points[i];
@@ -746,15 +817,15 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   const std::size_t count = entries.size();
   cells.keys.resize(count);
   CellStore store;
-  store.resize(count, options.boundary);
+  store.records.resize(count);
+  store.points.resize(count);
+  store.point_sum.resize(count);
   CellMap numbering(count);
   for (std::size_t i = 0; i < count; ++i) {
     const Entry& e = entries[i];
     CellStore& from = state[e.owner].store;
     cells.keys[i] = state[e.owner].keys[e.index];
-    store.quadrics[i] = from.quadrics[e.index];
-    if (options.boundary) store.border[i] = from.border[e.index];
-    store.touched[i] = from.touched[e.index];
+    store.records[i] = from.records[e.index];
     store.points[i] = from.points[e.index];
     store.point_sum[i] = from.point_sum[e.index];
     bool inserted;
@@ -776,11 +847,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     }
   }
   tbb::parallel_sort(cells.triangles.begin(), cells.triangles.end());
-  cells.quadrics = std::move(store.quadrics);
-  cells.border = std::move(store.border);
-  cells.touched = std::move(store.touched);
-  cells.points = std::move(store.points);
-  cells.point_sum = std::move(store.point_sum);
+  store.move_into(cells, options.boundary);
   return cells;
 }
 

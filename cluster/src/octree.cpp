@@ -153,6 +153,11 @@ class FaceTracker {
   TripleCounter faces_;
 };
 
+// Merging clusters that are not face neighbours costs this many times its error increase: such a union is
+// not a compact region and its triangles tend to fold over its neighbours', so it should wait, but not for
+// every neighbour merge however expensive (that leaves small clusters stranded beside large ones).
+constexpr double kDetachedPenalty = 4.0;
+
 struct Candidate {
   double cost;
   std::uint32_t a, b;  // a < b
@@ -198,14 +203,18 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   std::vector<std::array<std::uint32_t, 8>> members(nodes);
   std::vector<std::uint32_t> node_parent(nodes, kEnd);
   std::vector<std::uint32_t> cell_node(n, kEnd);
+  // Which octant of its parent each node and each fine cell is (the low three bits of its Morton prefix).
+  std::vector<std::uint8_t> node_octant(nodes, 0), cell_octant(n, 0);
   for (int l = 1; l <= levels; ++l) {
     for (std::size_t i = 0; i < prefix[l].size(); ++i) {
       const std::uint32_t up = offset[l - 1] + parent[l][i];
       ++pending[up];
       if (l < levels) {
         node_parent[offset[l] + i] = up;
+        node_octant[offset[l] + i] = static_cast<std::uint8_t>(prefix[l][i] & 7);
       } else {
         cell_node[i] = up;
+        cell_octant[i] = static_cast<std::uint8_t>(prefix[l][i] & 7);
       }
     }
   }
@@ -222,19 +231,34 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     error[i] = place(sums[i], representative).error;
     union_of[i] = static_cast<std::uint32_t>(i);
   }
+  // The octants of its node that each cluster covers. Two clusters are neighbours when an octant of one
+  // shares a face with an octant of the other (the octant numbers differ in one bit).
+  std::vector<std::uint8_t> octants(n, 0);
+  static constexpr auto kNeighbours = [] {
+    std::array<std::uint8_t, 256> near{};
+    for (unsigned mask = 0; mask < 256; ++mask) {
+      for (unsigned o = 0; o < 8; ++o) {
+        if (mask & (1u << o))
+          near[mask] |= static_cast<std::uint8_t>((1u << (o ^ 1)) | (1u << (o ^ 2)) | (1u << (o ^ 4)));
+      }
+    }
+    return near;
+  }();
   std::priority_queue<Candidate> queue;
   auto push = [&](std::uint32_t a, std::uint32_t b) {
     if (a > b) std::swap(a, b);
     PlacementSums merged = sums[a];
     merged.add(sums[b]);
-    const double cost = place(merged, representative).error - error[a] - error[b];
+    double cost = place(merged, representative).error - error[a] - error[b];
+    if (!(kNeighbours[octants[a]] & octants[b])) cost *= kDetachedPenalty;
     queue.push({cost, a, b, version[a], version[b]});
   };
   std::vector<std::uint32_t> at(n, kEnd);  // the node a live cluster sits at (kEnd: the root's level)
   // Cluster c is the whole of a child of `node`: it joins the node's members, pairing with each, and while
   // it is the whole of the node too, moves on up.
-  auto arrive = [&](std::uint32_t c, std::uint32_t node) {
+  auto arrive = [&](std::uint32_t c, std::uint32_t node, std::uint8_t octant) {
     while (node != kEnd) {
+      octants[c] = static_cast<std::uint8_t>(1u << octant);
       --pending[node];
       std::array<std::uint32_t, 8>& m = members[node];
       for (std::uint8_t k = 0; k < member_count[node]; ++k) push(c, m[k]);
@@ -243,10 +267,11 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
       if (pending[node] != 0 || member_count[node] != 1) return;
       member_count[node] = 0;
       at[c] = kEnd;
+      octant = node_octant[node];
       node = node_parent[node];
     }
   };
-  for (std::size_t i = 0; i < n; ++i) arrive(static_cast<std::uint32_t>(i), cell_node[i]);
+  for (std::size_t i = 0; i < n; ++i) arrive(static_cast<std::uint32_t>(i), cell_node[i], cell_octant[i]);
   cell_node = {};
 
   std::unique_ptr<FaceTracker> faces;
@@ -270,6 +295,7 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     if (!alive[c.a] || !alive[c.b] || version[c.a] != c.version_a || version[c.b] != c.version_b) continue;
     const std::uint32_t a = c.a, b = c.b, node = at[a];
     sums[a].add(sums[b]);
+    octants[a] |= octants[b];
     error[a] = place(sums[a], representative).error;
     ++version[a];
     alive[b] = 0;
@@ -291,13 +317,13 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     if (pending[node] == 0 && count == 1) {
       member_count[node] = 0;
       at[a] = kEnd;
-      arrive(a, node_parent[node]);
+      arrive(a, node_parent[node], node_octant[node]);
     } else {
       for (std::uint8_t k = 0; k < count; ++k)
         if (m[k] != a) push(a, m[k]);
     }
   }
-  result.target_met = done(live);
+  result.target_met = target.faces > 0 ? faces->faces() <= target.faces : live == target.vertices;
 
   // Number clusters by their first fine cell.
   std::vector<std::uint32_t> id(n, kEnd);

@@ -54,21 +54,29 @@ Vec3d minimize_damped(const Quadric& q, const Vec3d& origin) {
   return origin + damped_step(a, a * origin + q.b(), tau);
 }
 
-Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, double weight) {
+Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, const Quadric& surface,
+                       double weight) {
   Quadric q;
+  // The cell's dominant surface normal. What interior edges leave behind is exactly along their two
+  // triangles' mean normal (for unit normals n1, n2 both perpendicular to the edge e, e x (n1 - n2) is
+  // parallel to n1 + n2), so along the surface normal, be it curvature or scanner noise; a border's plane
+  // normal lies in the surface. Only the part of a slot's normal along the surface counts.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(surface.a());
+  if (!(solver.eigenvalues()(2) > 0.0)) return q;
+  const Vec3d normal = solver.eigenvectors().col(2);
   const Vec3d origin = grid.cell_origin(key);
   for (const auto& s : border.slot) {
     const Vec3d m(s[0], s[1], s[2]);
     const double length = m.norm();
     if (!(length > 0.0)) continue;
     const Vec3d n = m / length;
+    const double along_surface = (m - m.dot(normal) * normal).squaredNorm();
     // n . (x - origin) / cell + w / length = 0, in world units. The weight grows with the square of what is
-    // left of the normals: one border crossing leaves 1, the cancellation of interior edges leaves ~1e-6 of
-    // float residue (weight 1e-12) and, on curved surfaces, their small dihedral angles (tangent planes,
-    // which agree with the surface anyway). No threshold, so nothing flips when sums are taken in another
-    // order.
+    // left: one border crossing leaves 1, the cancellation of interior edges ~1e-6 of float residue. No
+    // threshold, so nothing flips when sums are taken in another order.
     const double d = grid.cell * s[3] / length - n.dot(origin);
-    q += Quadric::plane(n, d, weight * length * length * grid.cell * grid.cell);
+    q += Quadric::plane(n, d, weight * along_surface * grid.cell * grid.cell);
   }
   return q;
 }
@@ -77,7 +85,9 @@ PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, doub
   PlacementSums s;
   const CellKey key = cells.keys[cell];
   s.quadric = cells.quadrics[cell];
-  if (cells.has_border()) s.quadric += border_quadric(cells.border[cell], cells.grid, key, boundary_weight);
+  if (cells.has_border()) {
+    s.quadric += border_quadric(cells.border[cell], cells.grid, key, cells.quadrics[cell], boundary_weight);
+  }
   s.points = cells.points[cell];
   s.point_sum =
       s.points * cells.grid.cell_origin(key) + cells.grid.cell * cells.point_sum[cell].cast<double>();

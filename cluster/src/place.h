@@ -24,8 +24,11 @@ struct PlacementSums {
 };
 
 // The border planes of a cell as a quadric: each direction slot whose planes did not cancel becomes the
-// plane of their summed normal and offset, weighted by `weight` x (crossings left) x cell_size^2.
-Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, double weight);
+// plane of their summed normal and offset, weighted by `weight` x cell_size^2 x the squared length of that
+// normal's component along the surface (`surface`: the cell's quadric, whose dominant eigenvector is taken
+// as the surface normal).
+Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, const Quadric& surface,
+                       double weight);
 
 PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, double boundary_weight);
 

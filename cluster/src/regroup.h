@@ -35,7 +35,7 @@ struct OctreeTarget {
 
 // Merges sibling clusters of the fine power-of-two grid bottom-up, least increase of quadric error first,
 // one pair at a time, so any vertex count is reachable exactly. A node's cluster joins its parent's siblings
-// once all of the node's children have merged into it.
+// once all of the node's children have merged into it. Pairs whose octants share no face pay a penalty.
 Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Representative representative,
                         double boundary_weight, const ProgressFn& progress);
 

@@ -249,6 +249,15 @@ TEST(Cluster, OctreeReturnsExactlyTheRequestedVertexCount) {
     EXPECT_TRUE(stats.target_met);
     EXPECT_GE(stats.fine_cells, n);
   }
+  // More vertices than the input has cells to give: all of them, and the stats say the target was missed.
+  ClusterOptions options;
+  options.octree = true;
+  options.target_vertices = 10 * mesh.vertex_count();
+  ClusterStats stats;
+  const QuadricMesh out = run(mesh, options, &stats);
+  EXPECT_FALSE(stats.target_met);
+  EXPECT_EQ(out.mesh.vertex_count(), stats.fine_cells);
+  EXPECT_LE(out.mesh.vertex_count(), mesh.vertex_count());
 }
 
 TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {

@@ -3,7 +3,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <map>
 #include <memory>
 #include <optional>
 
@@ -30,6 +29,7 @@ void add_cluster_command(CLI::App& app) {
     std::string input, output, report;
     ClusterOptions options;
     std::uint64_t faces = 0, vertices = 0;
+    std::string representative = "quadric";
     bool no_boundary = false;
     bool ascii = false;
     bool quiet = false;
@@ -53,16 +53,12 @@ void add_cluster_command(CLI::App& app) {
   grid->excludes(cell);
   faces->excludes(grid)->excludes(cell);
   vertices->excludes(faces)->excludes(grid)->excludes(cell)->needs(octree);
-  static const std::map<std::string, Representative> representatives = {
-      {"quadric", Representative::quadric},
-      {"constrained", Representative::constrained},
-      {"mean", Representative::mean}};
   cmd->add_option(
-         "--representative", flags->options.representative,
+         "--representative", flags->representative,
          "Where a cell puts its vertex: quadric (minimizer of the cell's quadric), constrained (that "
          "minimizer kept inside the cell) or mean (average of the cell's vertices)")
-      ->transform(CLI::CheckedTransformer(representatives, CLI::ignore_case))
-      ->default_str("quadric");
+      ->check(CLI::IsMember({"quadric", "constrained", "mean"}))
+      ->capture_default_str();
   cmd->add_flag("--no-boundary", flags->no_boundary, "Do not hold open borders in place");
   cmd->add_option("--boundary-weight", flags->options.boundary_weight,
                   "Weight of a border crossing against a cell's worth of surface")
@@ -80,6 +76,9 @@ void add_cluster_command(CLI::App& app) {
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
     ClusterOptions options = flags->options;
     options.preserve_boundary = !flags->no_boundary;
+    options.representative = flags->representative == "mean"          ? Representative::mean
+                             : flags->representative == "constrained" ? Representative::constrained
+                                                                      : Representative::quadric;
     options.target_faces = flags->faces;
     options.target_vertices = flags->vertices;
     if (options.octree && flags->vertices == 0 && flags->faces == 0) {
