@@ -143,11 +143,14 @@ inline int corner_of(const Face& f, Index v) {
   return f.v[0] == v ? 0 : f.v[1] == v ? 1 : 2;
 }
 
+// Calls body(begin, end) on the fixed chunks [k * grain, (k + 1) * grain) in parallel. Chunks are aligned to
+// multiples of grain (tbb's own range splitting halves ranges and is not), so callers may index per-chunk
+// results by begin / grain.
 template <class Body>
 void parallel_chunks(std::size_t n, std::size_t grain, const Body& body) {
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, n, grain),
-      [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); }, tbb::simple_partitioner());
+  const std::size_t chunks = (n + grain - 1) / grain;
+  tbb::parallel_for(std::size_t{0}, chunks,
+                    [&](std::size_t k) { body(k * grain, std::min(n, (k + 1) * grain)); });
 }
 
 // Sorts a short list in place (neighbour lists have a handful of entries).
@@ -656,6 +659,17 @@ struct Decimator {
       }
     }
     return d;
+  }
+
+  // Undoes build_quadrics' shift to the local origin o: Q(x) = Q_rel(x - o).
+  Quadric absolute(const Quadric& rel_q) const {
+    Quadric q = rel_q;
+    const Vec3d o = origin;
+    q.b0 -= q.a00 * o.x() + q.a01 * o.y() + q.a02 * o.z();
+    q.b1 -= q.a01 * o.x() + q.a11 * o.y() + q.a12 * o.z();
+    q.b2 -= q.a02 * o.x() + q.a12 * o.y() + q.a22 * o.z();
+    q.c = decimate_detail::evaluate(rel_q, -o);
+    return q;
   }
 
   static double trace(const Quadric& q) { return q.a00 + q.a11 + q.a22; }
@@ -1320,7 +1334,7 @@ struct Decimator {
     stats.reason = prefix + "every remaining candidate is blocked: " + why;
   }
 
-  IndexedMesh output() {
+  IndexedMesh output(std::vector<Quadric>* quadrics) {
     IndexedMesh out;
     const std::size_t nv = verts.size();
     std::vector<Index> remap(nv);
@@ -1336,6 +1350,7 @@ struct Decimator {
       if (!normals.empty()) out.normals.push_back(normals[v]);
       if (!colors.empty()) out.colors.push_back(colors[v]);
       if (!uvs.empty()) out.uvs.push_back(uvs[v]);
+      if (quadrics) quadrics->push_back(absolute(verts[v].q));
     }
     out.triangles.reserve(faces_alive);
     for (const Face& t : faces) {
@@ -1393,7 +1408,7 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   d.run();
   d.explain();
   DecimateResult result;
-  result.mesh = d.output();
+  result.mesh = d.output(options.output_quadrics ? &result.quadrics : nullptr);
   result.stats = d.stats;
   return result;
 }

@@ -586,6 +586,28 @@ TEST(Decimate, CarriedQuadricsMeasureTheOriginalSurface) {
 
 // ------------------------------------------------------------------ attributes
 
+TEST(Decimate, OutputQuadricsCarryTheOriginalSurface) {
+  const IndexedMesh sphere = test::sphere(5);  // closed: no border planes, so trace(A) sums the face areas
+  double area = 0;
+  for (const Triangle& t : sphere.triangles) area += 0.5 * face_normal(sphere, t).norm();
+  DecimateOptions options = faces(500);
+  options.output_quadrics = true;
+  const DecimateResult r = run(sphere, options);
+  ASSERT_EQ(r.quadrics.size(), r.mesh.vertex_count());
+  double trace = 0;
+  for (std::size_t v = 0; v < r.quadrics.size(); ++v) {
+    const Quadric& q = r.quadrics[v];
+    const double t = q.a00 + q.a11 + q.a22;
+    trace += t;
+    // Each vertex's error against the planes it stands for is no more than the worst collapse applied.
+    const double d2 = q.evaluate(r.mesh.positions[v].cast<double>()) / t;
+    EXPECT_LE(d2, r.stats.max_error * r.stats.max_error * (1 + 1e-3) + 1e-12) << v;  // float positions
+  }
+  // Every face plane went to its three corners with weight = area and unit normal: trace 3 * area in all.
+  EXPECT_NEAR(trace, 3 * area, 1e-6 * area);
+  EXPECT_TRUE(run(sphere, faces(500)).quadrics.empty());
+}
+
 TEST(Decimate, AttributesAreCarriedAndInterpolated) {
   IndexedMesh sphere = test::sphere(4);
   for (const Vec3f& p : sphere.positions) {

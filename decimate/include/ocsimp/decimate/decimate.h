@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
@@ -84,6 +85,11 @@ struct DecimateOptions {
   // attributes are kept).
   bool weld = false;
 
+  // Also return each output vertex's quadric (DecimateResult::quadrics): the sum of everything its input
+  // vertices carried, plus the border and fold planes this run added, so a further decimation of the result
+  // (an LOD chain) still measures distance to the original surface.
+  bool output_quadrics = false;
+
   // Threads for the setup phases (0: all cores). The result does not depend on it.
   int threads = 0;
   // Collapses done out of collapses expected ("decimate" phase; total 0 when only max_error is given).
@@ -126,6 +132,7 @@ struct DecimateStats {
 
 struct DecimateResult {
   IndexedMesh mesh;
+  std::vector<Quadric> quadrics;  // per mesh vertex, when DecimateOptions::output_quadrics; else empty
   DecimateStats stats;
 };
 
