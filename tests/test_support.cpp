@@ -1,9 +1,33 @@
 #include "test_support.h"
 
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <fstream>
 #include <map>
+#include <sstream>
 #include <utility>
 
 namespace ocsimp::test {
+
+std::string file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+CommandResult run_ocsimp(const std::string& args, const TempDir& dir) {
+  const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string command =
+      std::string(OCSIMP_BINARY_DIR) + "/bin/ocsimp " + args + " >" + out + " 2>" + err;
+  const int status = std::system(command.c_str());
+  CommandResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = file_bytes(out);
+  r.err = file_bytes(err);
+  return r;
+}
 
 IndexedMesh sphere(int subdivisions, float radius) {
   IndexedMesh mesh;

@@ -48,6 +48,17 @@ inline IndexedMesh grid_square(int n) {
   return mesh;
 }
 
+// The built `ocsimp` binary run through the shell with `args` (shell-quoted), stdout and stderr captured in
+// files under `dir`.
+struct CommandResult {
+  int exit_code = -1;  // -1 when it did not exit normally (killed by a signal)
+  std::string out, err;
+};
+CommandResult run_ocsimp(const std::string& args, const TempDir& dir);
+
+// A whole file's bytes ("" when it cannot be read).
+std::string file_bytes(const std::string& path);
+
 // A closed, outward-facing sphere of radius r: the subdivided octahedron, each level projected to the sphere.
 IndexedMesh sphere(int subdivisions, float radius = 1.0f);
 // A closed, outward-facing axis-aligned cube [0,1]^3 with each face a grid of n x n quads.

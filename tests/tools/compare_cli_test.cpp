@@ -1,13 +1,10 @@
 // `ocsimp compare` end to end: its numbers are the library's, repeat across thread counts, and bad input
 // fails with one line.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <algorithm>
-#include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 
 #include "ocsimp/streaming/io.h"
@@ -17,28 +14,7 @@
 namespace ocsimp {
 namespace {
 
-struct CompareRun {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-CompareRun run_ocsimp(const std::string& args, const test::TempDir& dir) {
-  const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string command =
-      std::string(OCSIMP_BINARY_DIR) + "/bin/ocsimp " + args + " >" + out + " 2>" + err;
-  const int status = std::system(command.c_str());
-  CompareRun r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  auto slurp = [](const std::string& path) {
-    std::ifstream in(path);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
-}
+using test::run_ocsimp;
 
 TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
   test::TempDir dir;
@@ -49,9 +25,9 @@ TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
   write_mesh(dir / "simplified.ply", simplified);
   const std::string args =
       "compare --json --samples 30000 --seed 9 " + (dir / "original.ply") + " " + (dir / "simplified.ply");
-  const CompareRun one = run_ocsimp(args + " --threads 1", dir);
+  const test::CommandResult one = run_ocsimp(args + " --threads 1", dir);
   ASSERT_EQ(one.exit_code, 0) << one.err;
-  const CompareRun two = run_ocsimp(args + " --threads 2", dir);
+  const test::CommandResult two = run_ocsimp(args + " --threads 2", dir);
   ASSERT_EQ(two.exit_code, 0) << two.err;
   EXPECT_EQ(one.out, two.out);
 
@@ -74,7 +50,7 @@ TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
   EXPECT_DOUBLE_EQ(j["rms_percent"].get<double>(), 100 * d.rms / d.diagonal);
   EXPECT_GT(d.hausdorff, 0.01);  // the shift alone
 
-  const CompareRun table = run_ocsimp(
+  const test::CommandResult table = run_ocsimp(
       "compare -q --samples 30000 --seed 9 " + (dir / "original.ply") + " " + (dir / "simplified.ply"), dir);
   ASSERT_EQ(table.exit_code, 0) << table.err;
   for (const char* row : {"forward", "backward", "symmetric", "Hausdorff", "RMS"})
@@ -83,17 +59,18 @@ TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
 
 TEST(CompareCli, HelpShowsDefaultsAndBadInputFailsWithOneLine) {
   test::TempDir dir;
-  const CompareRun help = run_ocsimp("compare --help", dir);
+  const test::CommandResult help = run_ocsimp("compare --help", dir);
   EXPECT_EQ(help.exit_code, 0);
   for (const char* text : {"--samples", "1000000", "--seed", "--json", "--no-vertices", "--threads"})
     EXPECT_NE(help.out.find(text), std::string::npos) << text;
 
   write_mesh(dir / "square.ply", test::grid_square(2));
-  const CompareRun unknown =
+  const test::CommandResult unknown =
       run_ocsimp("compare --no-such-flag " + (dir / "square.ply") + " " + (dir / "square.ply"), dir);
   EXPECT_EQ(unknown.exit_code, 2);
 
-  const CompareRun missing = run_ocsimp("compare " + (dir / "square.ply") + " " + (dir / "nope.ply"), dir);
+  const test::CommandResult missing =
+      run_ocsimp("compare " + (dir / "square.ply") + " " + (dir / "nope.ply"), dir);
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_NE(missing.err.find("nope.ply"), std::string::npos);
   EXPECT_EQ(std::count(missing.err.begin(), missing.err.end(), '\n'), 1) << missing.err;
@@ -103,7 +80,8 @@ TEST(CompareCli, HelpShowsDefaultsAndBadInputFailsWithOneLine) {
       << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
          "property float z\nelement face 0\nproperty list uchar int vertex_indices\n"
          "end_header\n0 0 0\n1 0 0\n0 1 0\n";
-  const CompareRun empty = run_ocsimp("compare " + (dir / "square.ply") + " " + (dir / "points.ply"), dir);
+  const test::CommandResult empty =
+      run_ocsimp("compare " + (dir / "square.ply") + " " + (dir / "points.ply"), dir);
   EXPECT_EQ(empty.exit_code, 2);
   EXPECT_NE(empty.err.find("points.ply"), std::string::npos) << empty.err;
   EXPECT_EQ(std::count(empty.err.begin(), empty.err.end(), '\n'), 1) << empty.err;
