@@ -6,13 +6,15 @@
 // so looking at a neighbour costs two adjacent cache lines; a face holds its 3 corners, the ids of its 3
 // edges and its input normal; an edge holds its endpoints and its slot in an 8-ary heap of float keys. A
 // vertex's incident faces are a circular list of CSR segments (its own, then those of the vertices it
-// absorbed), compacted in place as faces die, so nothing is allocated per collapse. The large arrays ask for
+// absorbed); each gather packs the live ones into as few segments as hold them, so nothing is allocated per
+// collapse and a vertex that absorbed many others still reads one or two lists. The large arrays ask for
 // transparent huge pages.
 //
 // The queue is in priority order, so consecutive collapses land anywhere in memory and the loop is bound by
 // memory latency. Two things hide some of it: the next collapse is nearly always the cheapest child of the
-// heap's root (99.7 % on a 1 M-triangle scan), so its records are prefetched stage by stage while the current
-// one computes; and each collapse prefetches the records it is about to re-cost.
+// heap's root (99.7 % on a 1 M-triangle scan), so its records, lists, faces and then its neighbours' records
+// are prefetched stage by stage while the current one computes (about 20 % of the CPU time of a 1 M-triangle
+// decimation); and each collapse prefetches the records it is about to re-cost.
 //
 // A candidate's key comes from its quadric cost (plus the attribute penalty). Guards and the shape penalty
 // depend on the neighbourhood, which moves without the pair's quadric changing, so they are evaluated when
@@ -41,6 +43,7 @@
 namespace ocsimp {
 namespace {
 
+using decimate_detail::add_pair;
 using decimate_detail::add_to;
 using decimate_detail::BigVector;
 using decimate_detail::EdgeHeap;
@@ -91,6 +94,7 @@ struct alignas(64) Vertex {
   Index seg_next;              // circular list of the segments the head vertex owns
   Index live_faces;            // 0: removed (or never used)
   std::uint32_t stamp, mark;   // scratch for neighbourhood maps
+  Index seg_cap;               // room in this vertex's own segment (its input valence)
   Quadric q;                   // relative to the local origin
 };
 static_assert(sizeof(Vertex) == 128);
@@ -116,15 +120,18 @@ inline void encode_normal(const Vec3d& n, std::int16_t out[2]) {
     x = fx;
     y = fy;
   }
-  out[0] = static_cast<std::int16_t>(std::lround(x * 32767));
-  out[1] = static_cast<std::int16_t>(std::lround(y * 32767));
+  // Rounds half away from zero, as lround does, without its library call.
+  out[0] = static_cast<std::int16_t>(x * 32767 + (x < 0 ? -0.5 : 0.5));
+  out[1] = static_cast<std::int16_t>(y * 32767 + (y < 0 ? -0.5 : 0.5));
 }
 
+// The decoded direction is scaled by 32767 (no division): its only use is in tests that do not depend on
+// its length.
 inline Vec3d decode_normal(const std::int16_t in[2]) {
-  double x = in[0] / 32767.0, y = in[1] / 32767.0;
-  const double z = 1 - std::abs(x) - std::abs(y);
+  double x = in[0], y = in[1];
+  const double z = 32767 - std::abs(x) - std::abs(y);
   if (z < 0) {
-    const double fx = (1 - std::abs(y)) * (x < 0 ? -1 : 1), fy = (1 - std::abs(x)) * (y < 0 ? -1 : 1);
+    const double fx = (32767 - std::abs(y)) * (x < 0 ? -1 : 1), fy = (32767 - std::abs(x)) * (y < 0 ? -1 : 1);
     x = fx;
     y = fy;
   }
@@ -351,6 +358,7 @@ struct Decimator {
         x.seg_start = running;
         running += x.seg_count;
         x.live_faces = x.seg_count;
+        x.seg_cap = x.seg_count;
         if (x.seg_count > 0) {
           box.add(Vec3f(x.p[0], x.p[1], x.p[2]));
           ++verts_alive;
@@ -374,28 +382,31 @@ struct Decimator {
     build_heap();
   }
 
-  // The distinct neighbours w > v of v, sorted, and how many of v's faces contain each.
-  void upper_neighbours(Index v, std::vector<Index>& buffer, std::vector<Index>& unique,
-                        std::vector<Index>& multiplicity) const {
-    buffer.clear();
+  // The number of distinct neighbours w > v of v.
+  Index count_upper_neighbours(Index v, std::vector<Index>& buffer) const {
     const Vertex& x = verts[v];
+    // Room for every corner up front: no capacity check per element in this per-vertex loop.
+    if (buffer.size() < 2 * std::size_t{x.seg_count}) buffer.resize(2 * std::size_t{x.seg_count});
+    Index* out = buffer.data();
+    std::size_t n = 0;
     for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
       for (Index w : faces[vf[i]].v) {
-        if (w > v) buffer.push_back(w);
+        if (w > v) out[n++] = w;
       }
     }
-    small_sort(buffer.data(), buffer.data() + buffer.size());
-    unique.clear();
-    multiplicity.clear();
-    for (Index w : buffer) {
-      if (!unique.empty() && unique.back() == w) {
-        ++multiplicity.back();
-      } else {
-        unique.push_back(w);
-        multiplicity.push_back(1);
-      }
-    }
+    small_sort(out, out + n);
+    Index unique = 0;
+    for (std::size_t i = 0; i < n; ++i) unique += i == 0 || out[i] != out[i - 1];
+    return unique;
   }
+
+  // One side of a face seen from its lower endpoint v: the other endpoint w > v, the face, and which of the
+  // face's edge slots it is.
+  struct UpperSide {
+    Index w, f;
+    std::uint32_t slot;
+    bool operator<(const UpperSide& o) const { return w != o.w ? w < o.w : f < o.f; }
+  };
 
   // Each undirected edge gets an id from its lower endpoint: vertex v numbers the distinct neighbours w > v
   // it sees in its faces, in increasing w. Per-vertex work in parallel; a prefix sum makes the ids global.
@@ -404,11 +415,8 @@ struct Decimator {
     constexpr std::size_t grain = 4096;
     std::vector<Index> first_edge(nv + 1, 0);
     parallel_chunks(nv, grain, [&](std::size_t begin, std::size_t end) {
-      std::vector<Index> buffer, unique, multiplicity;
-      for (std::size_t v = begin; v < end; ++v) {
-        upper_neighbours(static_cast<Index>(v), buffer, unique, multiplicity);
-        first_edge[v + 1] = static_cast<Index>(unique.size());
-      }
+      std::vector<Index> buffer;
+      for (std::size_t v = begin; v < end; ++v) first_edge[v + 1] = count_upper_neighbours(Index(v), buffer);
     });
     for (std::size_t v = 0; v < nv; ++v) {
       if (std::uint64_t{first_edge[v]} + first_edge[v + 1] >= first_state)
@@ -423,45 +431,42 @@ struct Decimator {
     std::vector<std::vector<std::pair<Index, Index>>> chunk_boundaries((nv + grain - 1) / grain);
     std::vector<std::vector<std::pair<Index, Index>>> chunk_folds((nv + grain - 1) / grain);
     parallel_chunks(nv, grain, [&](std::size_t begin, std::size_t end) {
-      std::vector<Index> buffer, unique, multiplicity;
+      std::vector<UpperSide> sides;
       auto& found = chunk_boundaries[begin / grain];
       auto& folds = chunk_folds[begin / grain];
       for (std::size_t vi = begin; vi < end; ++vi) {
         const Index v = static_cast<Index>(vi);
-        upper_neighbours(v, buffer, unique, multiplicity);
-        const Index base = first_edge[v];
-        for (std::size_t k = 0; k < unique.size(); ++k) edges[base + k] = {{v, unique[k]}, kIdleError};
-        auto id_of = [&](Index w) {
-          return static_cast<Index>(std::lower_bound(unique.begin(), unique.end(), w) - unique.begin());
-        };
         const Vertex& x = verts[v];
+        if (sides.size() < 2 * std::size_t{x.seg_count}) sides.resize(2 * std::size_t{x.seg_count});
+        std::size_t n = 0;
         for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
           const Index f = vf[i];
-          Face& face = faces[f];
+          const Face& face = faces[f];
           const int c = corner_of(face, v);
           const Index next = face.v[(c + 1) % 3], prev = face.v[(c + 2) % 3];
-          if (next > v) {
-            const Index k = id_of(next);
-            face.e[c] = base + k;
-            if (multiplicity[k] == 1) found.emplace_back(base + k, f);
-          }
-          if (prev > v) {
-            const Index k = id_of(prev);
-            face.e[(c + 2) % 3] = base + k;
-            if (multiplicity[k] == 1) found.emplace_back(base + k, f);
-          }
+          if (next > v) sides[n++] = {next, f, std::uint32_t(c)};
+          if (prev > v) sides[n++] = {prev, f, std::uint32_t((c + 2) % 3)};
         }
-        for (std::size_t k = 0; k < unique.size(); ++k) {
-          if (multiplicity[k] != 2) continue;
-          Index pair[2], n = 0;
-          for (Index i = x.seg_start; i < x.seg_start + x.seg_count && n < 2; ++i) {
-            if (has_corner(faces[vf[i]], unique[k])) pair[n++] = vf[i];
+        // Insertion sort: a vertex has a handful of sides.
+        for (std::size_t i = 1; i < n; ++i) {
+          const UpperSide moving = sides[i];
+          std::size_t j = i;
+          for (; j > 0 && moving < sides[j - 1]; --j) sides[j] = sides[j - 1];
+          sides[j] = moving;
+        }
+        Index id = first_edge[v];
+        for (std::size_t i = 0; i < n; ++id) {
+          std::size_t j = i + 1;
+          while (j < n && sides[j].w == sides[i].w) ++j;
+          edges[id] = {{v, sides[i].w}, kIdleError};
+          for (std::size_t k = i; k < j; ++k) faces[sides[k].f].e[sides[k].slot] = id;
+          if (j - i == 1) {
+            found.emplace_back(id, sides[i].f);
+          } else if (j - i == 2 && is_fold(sides[i].f, sides[i + 1].f)) {
+            folds.emplace_back(id, sides[i].f);
+            folds.emplace_back(id, sides[i + 1].f);
           }
-          const Vec3d n0 = face_normal(pair[0]), n1 = face_normal(pair[1]);
-          if (n0.dot(n1) < kFoldCos * n0.norm() * n1.norm()) {
-            folds.emplace_back(base + static_cast<Index>(k), pair[0]);
-            folds.emplace_back(base + static_cast<Index>(k), pair[1]);
-          }
+          i = j;
         }
       }
     });
@@ -469,6 +474,17 @@ struct Decimator {
       boundary_list.insert(boundary_list.end(), chunk.begin(), chunk.end());
     boundary_edges = boundary_list.size();
     for (const auto& chunk : chunk_folds) fold_list.insert(fold_list.end(), chunk.begin(), chunk.end());
+  }
+
+  // Two faces turned back on each other by more than 120 degrees, judged by their encoded input normals
+  // (already computed, and the 1e-4 precision of the encoding does not matter for this threshold).
+  bool is_fold(Index f0, Index f1) const {
+    const Face& a = faces[f0];
+    const Face& b = faces[f1];
+    if (a.ref[0] == kNoNormal || b.ref[0] == kNoNormal) return false;
+    const Vec3d n0 = decode_normal(a.ref), n1 = decode_normal(b.ref);
+    const double dot = n0.dot(n1);
+    return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
   }
 
   void build_quadrics(std::vector<Quadric>& carried) {
@@ -497,11 +513,24 @@ struct Decimator {
           for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
             const Face& f = faces[vf[i]];
             const Vec3d p0 = rel(f.v[0]);
-            const Vec3d cross = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
-            const double length = cross.norm();
-            if (!(length > 0)) continue;
-            const Vec3d n = cross / length;
-            add_to(sum, Quadric::plane(n, -n.dot(p0), area ? 0.5 * length : 1.0));
+            const Vec3d n = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
+            const double length2 = n.squaredNorm();
+            if (!(length2 > 0)) continue;
+            // The plane of unit normal n / |n| weighted by the area |n| / 2 (or by 1), written on the
+            // unnormalized n: one square root and one division per face.
+            const double w = area ? 0.5 / std::sqrt(length2) : 1.0 / length2;
+            const double d = -n.dot(p0);
+            const double wx = w * n.x(), wy = w * n.y(), wz = w * n.z();
+            sum.a00 += wx * n.x();
+            sum.a01 += wx * n.y();
+            sum.a02 += wx * n.z();
+            sum.a11 += wy * n.y();
+            sum.a12 += wy * n.z();
+            sum.a22 += wz * n.z();
+            sum.b0 += wx * d;
+            sum.b1 += wy * d;
+            sum.b2 += wz * d;
+            sum.c += w * d * d;
           }
           verts[v].q = sum;
         }
@@ -694,8 +723,7 @@ struct Decimator {
     const Vertex& vb = verts[b];
     const bool la = va.flags & kLocked, lb = vb.flags & kLocked;
     if (la && lb) return kIdleLocked;
-    *q = va.q;
-    add_to(*q, vb.q);
+    add_pair(*q, va.q, vb.q);
     const Vec3d pa = rel(a), pb = rel(b);
     if (la) {
       *p = {pa, std::max(0.0, decimate_detail::evaluate(*q, pa))};
@@ -751,25 +779,35 @@ struct Decimator {
 
   // ---------------------------------------------------------------- adjacency
 
-  // The live faces around head vertex v, compacting its segments and unlinking emptied ones.
+  // The live faces around head vertex v. They are packed into as few of its segments as hold them (in
+  // circle order, v's own first) and the emptied segments are unlinked: a vertex that absorbed many others
+  // would otherwise keep a few live faces in each of their segments, and every gather would visit all of
+  // those scattered vertex records and lists (about a fifth of the collapse loop's cache misses).
   void gather_faces(Index v, std::vector<Index>& out) {
     out.clear();
-    Index prev = v;
     Index seg = v;
+    bool single = true;
+    do {
+      const Vertex& s = verts[seg];
+      const Index* list = vf.data() + s.seg_start;
+      for (Index i = 0; i < s.seg_count; ++i) {
+        const Index f = list[i];
+        if (face_alive(f)) out.push_back(f);
+      }
+      seg = s.seg_next;
+      single = single && seg == v;
+    } while (seg != v);
+    std::size_t written = 0;
+    Index prev = v;
+    seg = v;
     do {
       Vertex& s = verts[seg];
-      Index* list = vf.data() + s.seg_start;
-      const Index n = s.seg_count;
-      Index kept = 0;
-      for (Index i = 0; i < n; ++i) {
-        const Index f = list[i];
-        if (!face_alive(f)) continue;
-        list[kept++] = f;
-        out.push_back(f);
-      }
-      s.seg_count = kept;
       const Index next = s.seg_next;
-      if (kept == 0 && seg != v) {
+      const std::size_t n = single ? out.size() : std::min<std::size_t>(s.seg_cap, out.size() - written);
+      std::copy(out.begin() + written, out.begin() + written + n, vf.begin() + s.seg_start);
+      s.seg_count = static_cast<Index>(n);
+      written += n;
+      if (n == 0 && seg != v) {
         verts[prev].seg_next = next;
       } else {
         prev = seg;
@@ -945,9 +983,13 @@ struct Decimator {
   }
 
   // Stage 1: the predicted pair's vertex records. Stage 2 (those records have arrived): their face-list
-  // heads. Stage 3 (the lists have arrived): their faces. Reads of stale data are harmless: every index stays
-  // in range.
-  void prefetch_stage(Index e, int stage) const {
+  // heads. Stage 3 (the lists have arrived; issued before the current collapse's re-costs): their faces.
+  // Stage 4 (after the collapse): the faces' corners and edges. Reads of stale data are harmless: every index
+  // stays in range.
+  //
+  // Always inlined: GCC finds a function that only reads memory and prefetches to be pure, and then deletes
+  // its calls (their result is void), so out of line these prefetches were never issued.
+  [[gnu::always_inline]] void prefetch_stage(Index e, int stage) const {
     if (e == kNone) return;
     for (Index v : edges[e].v) {
       const Vertex& x = verts[v];
@@ -956,15 +998,29 @@ struct Decimator {
         __builtin_prefetch(reinterpret_cast<const char*>(&x) + 64);
       } else if (stage == 2) {
         __builtin_prefetch(vf.data() + x.seg_start);
-      } else {
+      } else if (stage == 3) {
         const Index* list = vf.data() + x.seg_start;
         for (Index i = 0; i < x.seg_count; ++i) __builtin_prefetch(&faces[list[i]]);
+      } else {
+        // Stage 4 (the faces have arrived): their corners, both cache lines (positions for the guards,
+        // quadrics for the re-costs), and their edges.
+        const Index* list = vf.data() + x.seg_start;
+        for (Index i = 0; i < x.seg_count; ++i) {
+          const Face& face = faces[list[i]];
+          if (face.v[0] == kNone) continue;
+          // The corner after v in each face: around an interior vertex, every neighbour once.
+          const int c = corner_of(face, v);
+          const char* next_corner = reinterpret_cast<const char*>(&verts[face.v[(c + 1) % 3]]);
+          __builtin_prefetch(next_corner);
+          __builtin_prefetch(next_corner + 64);
+          __builtin_prefetch(&edges[face.e[c]]);
+        }
       }
     }
   }
 
   // After gathering: the corners (for the shape guards) and the edges (merged or re-costed) around a and b.
-  void prefetch_neighbourhood(const std::vector<Index>& list, Index v) const {
+  [[gnu::always_inline]] void prefetch_neighbourhood(const std::vector<Index>& list, Index v) const {
     for (Index f : list) {
       const Face& face = faces[f];
       const int c = corner_of(face, v);
@@ -1050,8 +1106,8 @@ struct Decimator {
       }
     }
     prefetch_stage(next, 2);
-    collapse(e, a, b, q, pl, orphans);
-    prefetch_stage(next, 3);
+    collapse(e, a, b, q, pl, orphans, next);
+    prefetch_stage(next, 4);
   }
 
   void interpolate_attributes(Index a, Index b, Index k, const Vec3d& p) {
@@ -1075,7 +1131,8 @@ struct Decimator {
     }
   }
 
-  void collapse(Index e, Index a, Index b, const Quadric& q, const Placement& pl, std::uint64_t orphans) {
+  void collapse(Index e, Index a, Index b, const Quadric& q, const Placement& pl, std::uint64_t orphans,
+                Index next) {
     // Keep the locked end if there is one (it does not move), else the one with more faces (fewer rewrites).
     const bool la = locked(a), lb = locked(b);
     const bool keep_b = lb && !la ? true : la && !lb ? false : fb.size() > fa.size();
@@ -1181,6 +1238,8 @@ struct Decimator {
 
     if (!virtual_pairs.empty()) merge_virtual_pairs(k, r, s);
 
+    // The next pair's face lists arrived during the work above; its faces load during the re-costs.
+    prefetch_stage(next, 3);
     for (const Neighbour& n : nbrs) {
       if (!edge_dead(n.edge)) recost(n.edge);
     }

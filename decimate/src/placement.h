@@ -27,6 +27,19 @@ inline void add_to(Quadric& sum, const Quadric& q) {
   sum.c += q.c;
 }
 
+inline void add_pair(Quadric& sum, const Quadric& a, const Quadric& b) {
+  sum.a00 = a.a00 + b.a00;
+  sum.a01 = a.a01 + b.a01;
+  sum.a02 = a.a02 + b.a02;
+  sum.a11 = a.a11 + b.a11;
+  sum.a12 = a.a12 + b.a12;
+  sum.a22 = a.a22 + b.a22;
+  sum.b0 = a.b0 + b.b0;
+  sum.b1 = a.b1 + b.b1;
+  sum.b2 = a.b2 + b.b2;
+  sum.c = a.c + b.c;
+}
+
 inline double evaluate(const Quadric& q, const Vec3d& p) {
   const double x = p.x(), y = p.y(), z = p.z();
   return x * (q.a00 * x + 2 * (q.a01 * y + q.a02 * z + q.b0)) + y * (q.a11 * y + 2 * (q.a12 * z + q.b1)) +
@@ -37,41 +50,44 @@ inline double evaluate(const Quadric& q, const Vec3d& p) {
 // solution lies within `reach` edge lengths of the midpoint. Ties on the segment go to an endpoint, so
 // original samples (which lie on the original surface) survive where the quadric cannot tell positions apart.
 inline Placement place_pair(const Quadric& q, const Vec3d& pa, const Vec3d& pb, double reach) {
-  const Vec3d m = 0.5 * (pa + pb);
-  const Vec3d g(q.a00 * m.x() + q.a01 * m.y() + q.a02 * m.z() + q.b0,
-                q.a01 * m.x() + q.a11 * m.y() + q.a12 * m.z() + q.b1,
-                q.a02 * m.x() + q.a12 * m.y() + q.a22 * m.z() + q.b2);
-  const double q_m = m.dot(g) + q.b0 * m.x() + q.b1 * m.y() + q.b2 * m.z() + q.c;  // m.A.m + 2 b.m + c
-  const Vec3d d = pb - pa;
-  const double length2 = d.squaredNorm();
+  // Scalar code throughout: this runs for every candidate at setup and about seven times per collapse, and
+  // Eigen's small temporaries cost about a third more instructions here.
+  const double mx = 0.5 * (pa.x() + pb.x()), my = 0.5 * (pa.y() + pb.y()), mz = 0.5 * (pa.z() + pb.z());
+  const double gx = q.a00 * mx + q.a01 * my + q.a02 * mz + q.b0;
+  const double gy = q.a01 * mx + q.a11 * my + q.a12 * mz + q.b1;
+  const double gz = q.a02 * mx + q.a12 * my + q.a22 * mz + q.b2;
+  const double q_m = mx * (gx + q.b0) + my * (gy + q.b1) + mz * (gz + q.b2) + q.c;  // m.A.m + 2 b.m + c
+  const double dx = pb.x() - pa.x(), dy = pb.y() - pa.y(), dz = pb.z() - pa.z();
+  const double length2 = dx * dx + dy * dy + dz * dz;
 
   // Adjugate of the symmetric A; det from the first row.
   const double c00 = q.a11 * q.a22 - q.a12 * q.a12;
   const double c01 = q.a02 * q.a12 - q.a01 * q.a22;
   const double c02 = q.a01 * q.a12 - q.a02 * q.a11;
-  const double c11 = q.a00 * q.a22 - q.a02 * q.a02;
-  const double c12 = q.a01 * q.a02 - q.a00 * q.a12;
-  const double c22 = q.a00 * q.a11 - q.a01 * q.a01;
   const double det = q.a00 * c00 + q.a01 * c01 + q.a02 * c02;
   const double trace = q.a00 + q.a11 + q.a22;
   // det / trace^3 is 1/27 for an isotropic A and about lambda_min / (8 lambda_max) when one direction is
   // weak: below 1e-4 the minimizer moves a lot for a small change of the planes (a flat or cylindrical
   // region).
   if (trace > 0 && det > 1e-4 * trace * trace * trace) {
+    const double c11 = q.a00 * q.a22 - q.a02 * q.a02;
+    const double c12 = q.a01 * q.a02 - q.a00 * q.a12;
+    const double c22 = q.a00 * q.a11 - q.a01 * q.a01;
     const double s = -1.0 / det;
-    const Vec3d y(s * (c00 * g.x() + c01 * g.y() + c02 * g.z()),
-                  s * (c01 * g.x() + c11 * g.y() + c12 * g.z()),
-                  s * (c02 * g.x() + c12 * g.y() + c22 * g.z()));
-    if (y.squaredNorm() <= reach * reach * length2) {
-      return {m + y,
-              std::max(0.0, q_m + g.dot(y))};  // A y = -g, so Q(m + y) = q_m + 2 g.y + y.A.y = q_m + g.y
+    const double yx = s * (c00 * gx + c01 * gy + c02 * gz);
+    const double yy = s * (c01 * gx + c11 * gy + c12 * gz);
+    const double yz = s * (c02 * gx + c12 * gy + c22 * gz);
+    if (yx * yx + yy * yy + yz * yz <= reach * reach * length2) {
+      // A y = -g, so Q(m + y) = q_m + 2 g.y + y.A.y = q_m + g.y
+      return {Vec3d(mx + yx, my + yy, mz + yz), std::max(0.0, q_m + (gx * yx + gy * yy + gz * yz))};
     }
   }
   // On the segment m + t d, t in [-1/2, 1/2]: f(t) = q_m + 2 t g.d + t^2 d.A.d, convex.
-  const Vec3d ad(q.a00 * d.x() + q.a01 * d.y() + q.a02 * d.z(), q.a01 * d.x() + q.a11 * d.y() + q.a12 * d.z(),
-                 q.a02 * d.x() + q.a12 * d.y() + q.a22 * d.z());
-  const double curvature = d.dot(ad);
-  const double slope = g.dot(d);
+  const double adx = q.a00 * dx + q.a01 * dy + q.a02 * dz;
+  const double ady = q.a01 * dx + q.a11 * dy + q.a12 * dz;
+  const double adz = q.a02 * dx + q.a12 * dy + q.a22 * dz;
+  const double curvature = dx * adx + dy * ady + dz * adz;
+  const double slope = gx * dx + gy * dy + gz * dz;
   const double f_a = q_m - slope + 0.25 * curvature;
   const double f_b = q_m + slope + 0.25 * curvature;
   Placement best = f_a <= f_b ? Placement{pa, f_a} : Placement{pb, f_b};
@@ -80,7 +96,9 @@ inline Placement place_pair(const Quadric& q, const Vec3d& pa, const Vec3d& pb, 
     if (t > -0.5 && t < 0.5) {
       const double f_t = q_m + t * slope;  // f at its stationary point: q_m + 2 t slope + t^2 curvature
       // Only leave the endpoint for a real gain: rounding must not move an original sample.
-      if (f_t < best.error - 1e-9 * std::abs(best.error) - 1e-12 * trace * length2) best = {m + t * d, f_t};
+      if (f_t < best.error - 1e-9 * std::abs(best.error) - 1e-12 * trace * length2) {
+        best = {Vec3d(mx + t * dx, my + t * dy, mz + t * dz), f_t};
+      }
     }
   }
   best.error = std::max(0.0, best.error);

@@ -513,6 +513,42 @@ TEST(Decimate, BoundaryWeightKeepsTheBorderStraight) {
   EXPECT_LT(stiff_drift, kept_drift);
 }
 
+// A sheet folded back onto itself along y = 0.5 until its two halves are 10 degrees apart (face normals 170
+// degrees apart): the fold's border planes must hold the crease and the flap, which plane quadrics alone see
+// only weakly (the two planes are nearly parallel).
+TEST(Decimate, FoldedSheetKeepsItsCreaseAndFlap) {
+  const double pi = std::acos(-1.0);
+  const double open = 10 * pi / 180;
+  IndexedMesh sheet = test::grid_square(40);
+  for (Vec3f& p : sheet.positions) {
+    const double t = p.y() - 0.5;
+    if (t > 0) {
+      p.y() = static_cast<float>(0.5 - t * std::cos(open));
+      p.z() = static_cast<float>(t * std::sin(open));
+    }
+  }
+  const DecimateResult r = run(sheet, faces(320));
+  ASSERT_EQ(r.mesh.face_count(), 320u);
+  // Flap plane: through the crease (y = 0.5, z = 0), normal (0, sin, cos) of the open angle.
+  const Vec3d flap_normal(0, std::sin(open), std::cos(open));
+  double off_surface = 0, flap_reach = 0;
+  bool crease_ends[2] = {false, false};
+  for (const Vec3f& pf : r.mesh.positions) {
+    const Vec3d p = pf.cast<double>();
+    const double to_base = std::abs(p.z());
+    const double to_flap = std::abs((p - Vec3d(0, 0.5, 0)).dot(flap_normal));
+    off_surface = std::max(off_surface, std::min(to_base, to_flap));
+    if (to_flap < 1e-4 && p.z() > 1e-4) flap_reach = std::max(flap_reach, (p - Vec3d(p.x(), 0.5, 0)).norm());
+    for (int end = 0; end < 2; ++end) {
+      if ((p - Vec3d(end, 0.5, 0)).norm() < 1e-5) crease_ends[end] = true;
+    }
+  }
+  EXPECT_LT(off_surface, 1e-4);
+  EXPECT_TRUE(crease_ends[0] && crease_ends[1]);
+  EXPECT_NEAR(flap_reach, 0.5, 1e-3);  // the flap's far corners (0.5 from the crease) are still there
+  EXPECT_EQ(turned_faces(sheet, r.mesh), 0u);
+}
+
 // ------------------------------------------------------------------ error bound
 
 TEST(Decimate, MaxErrorIsHonoured) {
