@@ -1,19 +1,19 @@
 // The single pass over the input.
 //
-// Parallel scheme: the cells are split among owners (indexed input: runs of the Morton-ordered cell numbers,
-// a few owners per thread so that TBB can balance them; soups: blocks of cells hashed to one owner per
-// thread). An owner adds contributions to its own cells only, in input order, so every cell's sums are
-// taken in the same order whatever the thread count and the output is the same bytes for 1 or N threads -
-// which the "chunks merged in chunk order" would also give, but at the price of one partial copy of
-// the cells per chunk in flight. Here no per-thread copies exist: memory stays at one set of cells. A
-// triangle whose corners belong to two owners is computed by both (identically); that is a few per cent.
+// Parallel scheme (DESIGN.md, Threads): each batch is cut into fixed-size chunks of triangles, counted from
+// the batch's start, so the cuts do not depend on the thread count. Chunks run in parallel, each adding into
+// partial sums of its own (a few hundred cells for a coherent input, so they stay in cache); the partials are
+// then added to the cells' totals in chunk order. Every cell's totals are therefore the same floating-point
+// sums for 1 or N threads, and the output is the same bytes. Indexed input merges the partials in parallel
+// over ranges of cells, each range walking the chunks in order; soups merge on one thread, since their cells
+// are numbered as they first appear.
 //
 // Indexed input: the vertex array is visited first. Each vertex's cell is resolved once (a hash lookup per
 // vertex instead of per corner: the lookups are what this stage spends its time on) and written back into
 // the vertex's own 12 bytes together with its position inside the cell, quantized to 2^-21 of a cell per
 // axis - finer than the float input itself for any grid of 4 or more cells. The face loop then reaches a
 // corner's cell by index, with no hashing, and rebuilds the corner's position from the cell and the offset.
-// Each batch's corners are gathered once, in parallel, and its triangles listed per owner.
+// What is averaged per vertex is summed last, in fixed chunks of the vertex array, merged the same way.
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -106,8 +106,7 @@ struct alignas(64) CellRecord {
 };
 static_assert(sizeof(CellRecord) == 128, "a cell record is two cache lines");
 
-// The sums one owner adds to; indexed input has one shared store (owners touch disjoint cells), soups one
-// store per owner.
+// The cells' totals.
 struct CellStore {
   std::vector<CellRecord> records;
   ZeroedVector<std::uint32_t> points;
@@ -187,13 +186,12 @@ int dominant_axis(const Vec3d& e) {
   return y >= z ? 1 : 2;
 }
 
-// One triangle as the owners see it: corners, their cells, and the triangle's normal.
+// One triangle as a chunk sees it: corners, their cells, and the triangle's normal.
 struct Facet {
   Vec3d p[3];      // corner positions
   Vec3d local[3];  // corner positions in their cells' frames (cell units from each cell's lower corner)
   CellKey key[3];
-  std::uint32_t index[3];  // the corners' cells in the owner's store (valid where owned)
-  unsigned own;            // bit k: this owner holds corner k's cell
+  std::uint32_t index[3];  // the corners' cells in the chunk's numbering
   Vec3d cross;             // (p1 - p0) x (p2 - p0)
   double inverse_length;   // 1 / |cross|, 0 for a degenerate triangle
 
@@ -210,13 +208,13 @@ void set_inverse_lengths(Facet* facets, int count) {
   }
 }
 
-// Adds one triangle to the cells among its corners' that this owner holds.
-void contribute(const Facet& f, CellStore& store, const Grid& grid, bool boundary) {
+// Adds one triangle to its corners' cells.
+template <class Store>
+void contribute(const Facet& f, Store& store, const Grid& grid, bool boundary) {
   // A zero-area triangle adds no quadric (and no border planes: it has no normal), but still touches.
   const bool proper = f.inverse_length > 0.0;
   const TriangleQuadric q(f.cross, -f.cross.dot(f.p[0]), 0.5 * f.inverse_length);
   for (int k = 0; k < 3; ++k) {
-    if (!(f.own & (1u << k))) continue;
     // Each distinct cell once, with its corner count.
     if ((k >= 1 && f.key[k] == f.key[0]) || (k == 2 && f.key[2] == f.key[1])) continue;
     int multiplicity = 1;
@@ -229,7 +227,7 @@ void contribute(const Facet& f, CellStore& store, const Grid& grid, bool boundar
   const Vec3d n = f.cross * f.inverse_length;
   for (int k = 0; k < 3; ++k) {
     const int a = k, b = k == 2 ? 0 : k + 1;
-    if (f.key[a] == f.key[b] || !(f.own & ((1u << a) | (1u << b)))) continue;
+    if (f.key[a] == f.key[b]) continue;
     // The two half-edges of an interior edge compute e with exactly opposite bits and the midpoint in each
     // end's frame with exactly equal bits, so their planes cancel up to the difference of the two
     // triangles' normals.
@@ -240,12 +238,12 @@ void contribute(const Facet& f, CellStore& store, const Grid& grid, bool boundar
     const Vec3d half = (0.5 * grid.inverse_cell) * e;
     const int slot = dominant_axis(e);
     const Vec3f mf = m.cast<float>();
-    if (f.own & (1u << a)) {
+    {
       std::array<float, 4>& s = store.border(f.index[a]).slot[slot];
       s[0] += mf.x(), s[1] += mf.y(), s[2] += mf.z();
       s[3] += static_cast<float>(-m.dot(f.local[a] + half));
     }
-    if (f.own & (1u << b)) {
+    {
       std::array<float, 4>& s = store.border(f.index[b]).slot[slot];
       s[0] += mf.x(), s[1] += mf.y(), s[2] += mf.z();
       s[3] += static_cast<float>(-m.dot(f.local[b] - half));
@@ -253,11 +251,9 @@ void contribute(const Facet& f, CellStore& store, const Grid& grid, bool boundar
   }
 }
 
-constexpr unsigned kOwnersPerThread = 4;
-
-// One owner's surviving triangles: appended as they come (a hash set would cost a cache miss per triangle
-// in the face loop), sorted and merged whenever the log fills, so memory stays proportional to the distinct
-// triangles however often they repeat.
+// One chunk slot's overflowing surviving triangles: appended as they come (a hash set would cost a cache miss
+// per triangle in the face loop), sorted and merged whenever the log fills, so memory stays proportional to
+// the distinct triangles however often they repeat.
 class TriangleLog {
  public:
   explicit TriangleLog(std::size_t expected) : limit_(std::max<std::size_t>(4096, expected)) {}
@@ -290,11 +286,10 @@ class TriangleLog {
   std::size_t limit_;
 };
 
-// Reads the next batch on one task while the current one is prepared (`prepare(batch)`, which may run its
-// own parallel loop) and then processed by every owner (`process(batch, owner)`).
-template <class Prepare, class Process>
-std::uint64_t run_batches(TriangleStream& stream, unsigned owners, const ProgressFn& progress,
-                          Prepare&& prepare, Process&& process) {
+// Reads the next batch on one task while `work(batch)` (which runs its own parallel loops) handles the
+// current one.
+template <class Work>
+std::uint64_t run_batches(TriangleStream& stream, const ProgressFn& progress, Work&& work) {
   TriangleBatch current, next;
   std::uint64_t triangles = 0;
   bool have = stream.next(current);
@@ -304,8 +299,7 @@ std::uint64_t run_batches(TriangleStream& stream, unsigned owners, const Progres
     reader.run([&] { have_next = stream.next(next); });
     std::exception_ptr failure;
     try {
-      prepare(current);
-      tbb::parallel_for(0u, owners, [&](unsigned owner) { process(current, owner); });
+      work(current);
     } catch (...) {
       failure = std::current_exception();
     }
@@ -462,9 +456,9 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
   return codes;
 }
 
-// Surviving triangles of all owners in one array sized up front: each owner claims blocks of it, so the
-// face loop appends without hashing (a hash set costs a cache miss per triangle) and without per-owner
-// vectors that would have to be concatenated (a second copy at the memory peak). An owner that finds the
+// Surviving triangles of all chunks in one array sized up front: each chunk slot claims blocks of it, so the
+// face loop appends without hashing (a hash set costs a cache miss per triangle) and without per-slot
+// vectors that would have to be concatenated (a second copy at the memory peak). A slot that finds the
 // array full keeps a private log instead, compacted whenever it fills.
 class TriangleBuffer {
  public:
@@ -472,7 +466,11 @@ class TriangleBuffer {
   static constexpr CellTriangle kUnused{~std::uint32_t{0}, ~std::uint32_t{0}, ~std::uint32_t{0}};
 
   TriangleBuffer(std::size_t expected, unsigned owners) : items_(expected + kBlock * owners) {
-    for (unsigned t = 0; t < owners; ++t) overflow_.emplace_back(kBlock);
+    add_owners(owners);
+  }
+  // Owners numbered up to `owners` - 1 may add from now on; not while any owner adds.
+  void add_owners(std::size_t owners) {
+    while (overflow_.size() < owners) overflow_.emplace_back(kBlock);
   }
 
   struct Cursor {
@@ -495,7 +493,8 @@ class TriangleBuffer {
   // The distinct triangles, sorted, their orientation flags merged. `cursors`: each owner's last one.
   CellTriangles finish(const std::vector<Cursor>& cursors) {
     for (const Cursor& c : cursors) std::fill(items_.begin() + c.next, items_.begin() + c.end, kUnused);
-    items_.resize(std::min(items_.size(), claimed_.load()));
+    // Blocks that did not fit whole were never handed out.
+    items_.resize(std::min(items_.size() / kBlock * kBlock, claimed_.load()));
     for (TriangleLog& log : overflow_) {
       items_.insert(items_.end(), log.items().begin(), log.items().end());
       log.items() = {};
@@ -512,13 +511,193 @@ class TriangleBuffer {
   std::vector<TriangleLog> overflow_;
 };
 
+// ---- Chunks ----------------------------------------------------------------------------------------------
+
+// Triangles (or vertices) per chunk. The cuts count from the start of each batch, and batches do not depend
+// on the thread count, so neither do the chunks.
+constexpr std::size_t kChunkTriangles = 8192;
+constexpr std::size_t kChunkVertices = 1 << 16;
+
+// The cells one chunk touches -> the chunk's own numbering of them, in order of first touch. Open addressing
+// over a table that stays in cache: a chunk of a coherent input touches a few hundred cells. Keys: cell
+// numbers (indexed input) or cell keys (soups); all ones is never one.
+template <class Key>
+class ChunkTable {
+ public:
+  ChunkTable() : table_(kInitial, Entry{kEmpty, 0}), mask_(kInitial - 1) {}
+
+  // The chunk's number for `cell`; `inserted` says it is new (numbered ids().size() - 1).
+  std::uint32_t slot(Key cell, bool& inserted) {
+    inserted = false;
+    if (cell == last_cell_) return last_slot_;
+    if (2 * (ids_.size() + 1) > table_.size()) rehash(2 * table_.size());
+    std::size_t i = hash(cell);
+    for (; table_[i].key != kEmpty; i = (i + 1) & mask_) {
+      if (table_[i].key == cell) {
+        last_cell_ = cell;
+        last_slot_ = table_[i].slot;
+        return last_slot_;
+      }
+    }
+    const auto local = static_cast<std::uint32_t>(ids_.size());
+    table_[i] = {cell, local};
+    ids_.push_back(cell);
+    inserted = true;
+    last_cell_ = cell;
+    last_slot_ = local;
+    return local;
+  }
+  void clear() {
+    // A table grown by one scattered chunk shrinks back rather than being wiped whole for every chunk.
+    if (table_.size() > kInitial && table_.size() > 8 * ids_.size()) {
+      table_.assign(kInitial, Entry{kEmpty, 0});
+      mask_ = kInitial - 1;
+    } else {
+      std::fill(table_.begin(), table_.end(), Entry{kEmpty, 0});
+    }
+    ids_.clear();
+    order_.clear();
+    last_cell_ = kEmpty;
+  }
+  // Lists the chunk's numbers by ascending cell, for merge_chunks.
+  void sort_by_cell() {
+    order_.resize(ids_.size());
+    for (std::uint32_t s = 0; s < order_.size(); ++s) order_[s] = s;
+    std::sort(order_.begin(), order_.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return ids_[a] < ids_[b]; });
+  }
+  const std::vector<Key>& ids() const { return ids_; }
+  const std::vector<std::uint32_t>& order() const { return order_; }
+
+ private:
+  struct Entry {
+    Key key;
+    std::uint32_t slot;
+  };
+  static constexpr std::size_t kInitial = 2048;
+  static constexpr Key kEmpty = ~Key{0};
+  std::size_t hash(Key cell) const {
+    return static_cast<std::size_t>(static_cast<std::uint64_t>(cell) * 0x9E3779B97F4A7C15ull >> 32) & mask_;
+  }
+  void rehash(std::size_t capacity) {
+    table_.assign(capacity, Entry{kEmpty, 0});
+    mask_ = capacity - 1;
+    for (std::uint32_t s = 0; s < ids_.size(); ++s) {
+      std::size_t i = hash(ids_[s]);
+      while (table_[i].key != kEmpty) i = (i + 1) & mask_;
+      table_[i] = {ids_[s], s};
+    }
+  }
+
+  std::vector<Entry> table_;
+  std::size_t mask_;
+  std::vector<Key> ids_;              // number -> cell
+  std::vector<std::uint32_t> order_;  // numbers by ascending cell
+  Key last_cell_ = kEmpty;
+  std::uint32_t last_slot_ = 0;
+};
+
+// One chunk of faces: partial quadric and border sums of the cells it touches, and its surviving triangles'
+// place in the shared buffer.
+struct FaceChunk {
+  ChunkTable<std::uint32_t> table;
+  std::vector<CellRecord> records;
+  std::vector<CellKey> keys;
+  std::vector<Vec3d> origins;
+  TriangleBuffer::Cursor cursor;
+  std::uint64_t survived = 0;
+  struct Corners {
+    std::uint64_t q[3];
+    std::uint32_t cell[3];
+  };
+  // A triangle inside one cell: its cross product in world units and plane offset, then 1 / (2 |cross|).
+  struct Flat {
+    double cross[3];
+    double offset, squared, scale;
+    std::uint32_t slot;
+  };
+  // Scratch, kept from chunk to chunk.
+  std::vector<Corners> gathered;
+  std::vector<Flat> flats;
+  std::vector<std::uint32_t> crossing;  // the rest, by their place in `gathered`
+
+  std::uint32_t slot(std::uint32_t cell, const std::vector<CellKey>& all_keys, const Grid& grid) {
+    bool inserted;
+    const std::uint32_t s = table.slot(cell, inserted);
+    if (inserted) {
+      records.emplace_back();
+      keys.push_back(all_keys[cell]);
+      origins.push_back(grid.cell_origin(keys.back()));
+    }
+    return s;
+  }
+  CellKey key(std::uint32_t s) const { return keys[s]; }
+  const Vec3d& origin(std::uint32_t s) const { return origins[s]; }
+  Quadric& quadric(std::uint32_t s) { return records[s].quadric; }
+  BorderSums& border(std::uint32_t s) { return records[s].border; }
+  void touch(std::uint32_t) {}  // every cell of a chunk is touched; merging marks it
+  void clear() {
+    table.clear();
+    records.clear();
+    keys.clear();
+    origins.clear();
+    survived = 0;
+  }
+  void sort_by_cell() { table.sort_by_cell(); }
+};
+
+// One chunk of vertices: partial sums of what is averaged per cell.
+struct PointChunk {
+  ChunkTable<std::uint32_t> table;
+  std::vector<std::uint32_t> points;
+  std::vector<Vec3f> point_sum, normal_sum;
+  std::vector<std::array<std::uint64_t, 4>> color_sum;
+  std::vector<Vec2d> uv_sum;
+
+  std::uint32_t slot(std::uint32_t cell, bool normals, bool colors, bool uvs) {
+    bool inserted;
+    const std::uint32_t s = table.slot(cell, inserted);
+    if (inserted) {
+      points.push_back(0);
+      point_sum.emplace_back(Vec3f::Zero());
+      if (normals) normal_sum.emplace_back(Vec3f::Zero());
+      if (colors) color_sum.push_back({0, 0, 0, 0});
+      if (uvs) uv_sum.emplace_back(Vec2d::Zero());
+    }
+    return s;
+  }
+  void clear() {
+    table.clear();
+    points.clear();
+    point_sum.clear();
+    normal_sum.clear();
+    color_sum.clear();
+    uv_sum.clear();
+  }
+  void sort_by_cell() { table.sort_by_cell(); }
+};
+
+// Adds chunks 0..n-1's partial sums to the cells' totals: `add(chunk, number, cell)`. Each cell receives
+// its chunks' partials in chunk order, so its totals are the same floating-point sums however the cells
+// are split among threads here and however many threads produced the chunks.
+template <class Chunk, class Add>
+void merge_chunks(const Chunk* chunks, std::size_t n, std::size_t cells, Add&& add) {
+  tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, static_cast<std::uint32_t>(cells), 1 << 14),
+                    [&](const tbb::blocked_range<std::uint32_t>& r) {
+                      for (std::size_t j = 0; j < n; ++j) {
+                        const std::vector<std::uint32_t>& ids = chunks[j].table.ids();
+                        const std::vector<std::uint32_t>& order = chunks[j].table.order();
+                        auto it = std::partition_point(order.begin(), order.end(),
+                                                       [&](std::uint32_t s) { return ids[s] < r.begin(); });
+                        for (; it != order.end() && ids[*it] < r.end(); ++it) add(chunks[j], *it, ids[*it]);
+                      }
+                    });
+}
+
 FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options) {
   IndexedMesh& vertices = stream.scratch_vertices();
   std::vector<Vec3f>& positions = vertices.positions;
   const std::size_t vertex_count = positions.size();
-  // More owners than threads: TBB then balances the owners' uneven shares (and the reader's task) over the
-  // threads. Any number of owners gives the same sums, each cell's taken in input order.
-  const unsigned owners = std::max(1u, options.threads) * kOwnersPerThread;
   const Box3 bounds = stream.bounds();
 
   FineCells cells;
@@ -565,114 +744,115 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // pages back before the face pass, the memory peak, allocates its own.
   malloc_trim(0);
 #endif
-  // Face pass. Owners hold equal runs of the Morton-ordered cells: about equal shares of the surface.
+  // Face pass, in fixed chunks of each batch (see the top of this file).
   CellStore store;
   store.records.resize(count);
-  std::vector<std::uint32_t> owner_bounds(owners + 1);
-  for (unsigned t = 0; t <= owners; ++t) owner_bounds[t] = static_cast<std::uint32_t>(count * t / owners);
   // About two distinct triangles per cell on a closed surface; repeats are few when cells are much larger
   // than triangles.
-  TriangleBuffer triangles(count * 23 / 10, owners);
-  std::vector<TriangleBuffer::Cursor> cursors(owners);
-  std::vector<std::uint64_t> survivors(owners, 0);
+  TriangleBuffer triangles(count * 23 / 10, 16);
+  std::vector<FaceChunk> chunks;
   const Vec3f* packed = positions.data();
   const std::string& path = stream.path();
-  // Each batch's corners are gathered once, in parallel, into a flat array the owners then scan in order:
-  // otherwise every owner would chase the same random vertex reads.
-  struct Gathered {
-    std::uint64_t q[3];
-    std::uint32_t cell[3];
-  };
-  std::vector<Gathered> gathered;
-  // Each gathered triangle is listed for the owners of its corners' cells, per fixed slice of the batch, so
-  // an owner visits only its own triangles, in input order.
-  constexpr std::size_t kSlices = 32;
-  std::vector<std::vector<std::uint32_t>> listed(kSlices * owners);
-  auto owner_of = [&](std::uint32_t cell) {
-    return static_cast<unsigned>(std::upper_bound(owner_bounds.begin() + 1, owner_bounds.end() - 1, cell) -
-                                 (owner_bounds.begin() + 1));
-  };
-  auto gather = [&](const TriangleBatch& batch) {
-    if (!batch.corners.empty()) throw Error(path, {}, "an indexed stream delivered a triangle soup batch");
-    const std::size_t n = batch.triangles.size();
-    gathered.resize(n);
-    const std::size_t slice = (n + kSlices - 1) / kSlices;
-    tbb::parallel_for(std::size_t{0}, kSlices, [&](std::size_t s) {
-      for (unsigned t = 0; t < owners; ++t) listed[s * owners + t].clear();
-      for (std::size_t i = s * slice; i < std::min(n, (s + 1) * slice); ++i) {
-        const Triangle& t = batch.triangles[i];
-        Gathered& g = gathered[i];
-        for (int k = 0; k < 3; ++k) {
-          if (t[k] >= vertex_count) {
-            throw Error(path, {},
-                        "a triangle refers to vertex " + std::to_string(t[k]) + " of " +
-                            std::to_string(vertex_count));
-          }
-          unpack(packed[t[k]], g.cell[k], g.q[k]);
+  auto process = [&](const std::vector<Triangle>& batch, std::size_t j) {
+    FaceChunk& chunk = chunks[j];
+    chunk.clear();
+    const std::size_t begin = j * kChunkTriangles, end = std::min(batch.size(), begin + kChunkTriangles);
+    // The corners first, in a loop of independent loads: they are random reads into the vertex array, and
+    // many of them then wait on memory at once instead of one per triangle.
+    chunk.gathered.resize(end - begin);
+    for (std::size_t i = begin; i < end; ++i) {
+      const Triangle& t = batch[i];
+      FaceChunk::Corners& g = chunk.gathered[i - begin];
+      for (int k = 0; k < 3; ++k) {
+        if (t[k] >= vertex_count) {
+          throw Error(
+              path, {},
+              "a triangle refers to vertex " + std::to_string(t[k]) + " of " + std::to_string(vertex_count));
         }
-        const unsigned o0 = owner_of(g.cell[0]), o1 = owner_of(g.cell[1]), o2 = owner_of(g.cell[2]);
-        const auto index = static_cast<std::uint32_t>(i);
-        listed[s * owners + o0].push_back(index);
-        if (o1 != o0) listed[s * owners + o1].push_back(index);
-        if (o2 != o0 && o2 != o1) listed[s * owners + o2].push_back(index);
+        unpack(packed[t[k]], g.cell[k], g.q[k]);
       }
-    });
-  };
-  cells.input_triangles =
-      run_batches(stream, owners, options.progress, gather, [&](const TriangleBatch&, unsigned owner) {
-        const std::uint32_t lo = owner_bounds[owner], span = owner_bounds[owner + 1] - lo;
-        TriangleBuffer::Cursor& cursor = cursors[owner];
-        std::uint64_t survived = 0;
-        // Each triangle's contributions are added before the next triangle's: a cell's sums then run in
-        // input order whatever the owners are.
-        for (std::size_t s = 0; s < kSlices; ++s) {
-          for (const std::uint32_t i : listed[s * owners + owner]) {
-            const Gathered& g = gathered[i];
-            const std::uint32_t(&cell)[3] = g.cell;
-            if (cell[0] == cell[1] && cell[1] == cell[2]) {
-              // Most triangles lie inside one cell: one key, no border crossing, no survivor. In cell units
-              // the corners are small numbers: the cross product loses nothing to cancellation.
-              const Vec3d l0 = dequantize(g.q[0]);
-              const Vec3d cross =
-                  (grid.cell * grid.cell) * (dequantize(g.q[1]) - l0).cross(dequantize(g.q[2]) - l0);
-              const double squared = cross.squaredNorm();
-              if (squared > 0.0 && squared <= std::numeric_limits<double>::max()) {
-                const double offset = -cross.dot(grid.cell_origin(cells.keys[cell[0]]) + grid.cell * l0);
-                TriangleQuadric(cross, offset, 0.5 / std::sqrt(squared)).add_to(store.quadric(cell[0]), 3);
-              }
-              store.touch(cell[0]);
-              continue;
-            }
-            Facet f;
-            f.own = static_cast<unsigned>(cell[0] - lo < span) |
-                    static_cast<unsigned>(cell[1] - lo < span) << 1 |
-                    static_cast<unsigned>(cell[2] - lo < span) << 2;
-            for (int k = 0; k < 3; ++k) {
-              f.index[k] = cell[k];
-              f.key[k] = cells.keys[cell[k]];
-              f.local[k] = dequantize(g.q[k]);
-              f.p[k] = grid.cell_origin(f.key[k]) + grid.cell * f.local[k];
-            }
-            f.set_normal();
-            set_inverse_lengths(&f, 1);
-            contribute(f, store, grid, options.boundary);
-            if (cell[0] != cell[1] && cell[1] != cell[2] && cell[2] != cell[0]) {
-              const std::uint32_t first = std::min(cell[0], std::min(cell[1], cell[2]));
-              if (first - lo < span) {
-                triangles.add(cursor, owner, CellTriangle::of(cell[0], cell[1], cell[2]));
-                ++survived;
-              }
-            }
-          }
+    }
+    // Then in phases over the chunk, each a loop of independent steps: a triangle's square root and
+    // division would otherwise stall its own dependency chain.
+    std::vector<FaceChunk::Flat>& flats = chunk.flats;
+    std::vector<std::uint32_t>& crossing = chunk.crossing;
+    flats.clear();
+    crossing.clear();
+    const double area_unit = grid.cell * grid.cell;
+    for (std::uint32_t i = 0; i < chunk.gathered.size(); ++i) {
+      const FaceChunk::Corners& g = chunk.gathered[i];
+      const std::uint32_t(&cell)[3] = g.cell;
+      if (cell[0] == cell[1] && cell[1] == cell[2]) {
+        // Most triangles lie inside one cell: one key, no border crossing, no survivor. In cell units the
+        // corners are small numbers: the cross product loses nothing to cancellation.
+        FaceChunk::Flat& f = flats.emplace_back();
+        f.slot = chunk.slot(cell[0], cells.keys, grid);
+        const Vec3d l0 = dequantize(g.q[0]);
+        const Vec3d cross = area_unit * (dequantize(g.q[1]) - l0).cross(dequantize(g.q[2]) - l0);
+        f.cross[0] = cross.x(), f.cross[1] = cross.y(), f.cross[2] = cross.z();
+        f.offset = -cross.dot(chunk.origin(f.slot) + grid.cell * l0);
+        continue;
+      }
+      crossing.push_back(i);
+      if (cell[0] != cell[1] && cell[1] != cell[2] && cell[2] != cell[0]) {
+        triangles.add(chunk.cursor, static_cast<unsigned>(j), CellTriangle::of(cell[0], cell[1], cell[2]));
+        ++chunk.survived;
+      }
+    }
+    for (FaceChunk::Flat& f : flats) {
+      f.squared = f.cross[0] * f.cross[0] + f.cross[1] * f.cross[1] + f.cross[2] * f.cross[2];
+      f.scale = 0.5 / std::sqrt(f.squared);
+    }
+    for (const FaceChunk::Flat& f : flats) {
+      if (f.squared > 0.0 && f.squared <= std::numeric_limits<double>::max()) {
+        TriangleQuadric(Vec3d(f.cross[0], f.cross[1], f.cross[2]), f.offset, f.scale)
+            .add_to(chunk.quadric(f.slot), 3);
+      }
+    }
+    constexpr std::size_t kBlock = 64;
+    Facet facets[kBlock];
+    for (std::size_t start = 0; start < crossing.size(); start += kBlock) {
+      const int m = static_cast<int>(std::min(kBlock, crossing.size() - start));
+      for (int b = 0; b < m; ++b) {
+        const FaceChunk::Corners& g = chunk.gathered[crossing[start + b]];
+        Facet& f = facets[b];
+        for (int k = 0; k < 3; ++k) {
+          f.index[k] = chunk.slot(g.cell[k], cells.keys, grid);
+          f.key[k] = chunk.key(f.index[k]);
+          f.local[k] = dequantize(g.q[k]);
+          f.p[k] = chunk.origin(f.index[k]) + grid.cell * f.local[k];
         }
-        survivors[owner] += survived;
-      });
-  gathered = {};
-  for (unsigned t = 0; t < owners; ++t) cells.surviving_instances += survivors[t];
+        f.set_normal();
+      }
+      set_inverse_lengths(facets, m);
+      for (int b = 0; b < m; ++b) contribute(facets[b], chunk, grid, options.boundary);
+    }
+    chunk.sort_by_cell();
+  };
+  cells.input_triangles = run_batches(stream, options.progress, [&](const TriangleBatch& batch) {
+    if (!batch.corners.empty()) throw Error(path, {}, "an indexed stream delivered a triangle soup batch");
+    const std::size_t n = (batch.triangles.size() + kChunkTriangles - 1) / kChunkTriangles;
+    if (chunks.size() < n) {
+      chunks.resize(n);
+      triangles.add_owners(n);
+    }
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) { process(batch.triangles, j); });
+    merge_chunks(chunks.data(), n, count, [&](const FaceChunk& chunk, std::uint32_t s, std::uint32_t cell) {
+      CellRecord& to = store.records[cell];
+      to.quadric += chunk.records[s].quadric;
+      for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 4; ++c) to.border.slot[a][c] += chunk.records[s].border.slot[a][c];
+      store.touch(cell);
+    });
+    for (std::size_t j = 0; j < n; ++j) cells.surviving_instances += chunks[j].survived;
+  });
+  std::vector<TriangleBuffer::Cursor> cursors;
+  for (const FaceChunk& chunk : chunks) cursors.push_back(chunk.cursor);
+  chunks = {};
   cells.triangles = triangles.finish(cursors);
 
-  // What is averaged per vertex, from the packed vertices: deferred to here so that these sums do not sit
-  // in memory through the face pass. Each owner scans all vertices in order and adds its own cells'.
+  // What is averaged per vertex, from the packed vertices, in fixed chunks of the vertex array merged in
+  // order: deferred to here so that these sums do not sit in memory through the face pass.
   CellStore& sums = store;
   sums.points.resize(count);  // zeros that take memory only as they are written
   sums.point_sum.resize(count);
@@ -682,31 +862,44 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   if (normals) cells.normal_sum.assign(count, Vec3f::Zero());
   if (colors) cells.color_sum.assign(count, {0, 0, 0, 0});
   if (uvs) cells.uv_sum.assign(count, Vec2d::Zero());
-  const unsigned threads = std::max(1u, options.threads);
-  std::vector<std::uint32_t> vertex_bounds(threads + 1);
-  for (unsigned t = 0; t <= threads; ++t) vertex_bounds[t] = static_cast<std::uint32_t>(count * t / threads);
-  constexpr std::size_t kChunk = 1 << 20;
-  for (std::size_t start = 0; start < vertex_count; start += kChunk) {
-    const std::size_t end = std::min(vertex_count, start + kChunk);
-    // One owner per thread here: every owner reads every vertex of the chunk.
-    tbb::parallel_for(0u, threads, [&](unsigned owner) {
-      const std::uint32_t lo = vertex_bounds[owner], span = vertex_bounds[owner + 1] - lo;
-      for (std::size_t v = start; v < end; ++v) {
+  constexpr std::size_t kBlock = 1 << 20;
+  static_assert(kBlock % kChunkVertices == 0, "blocks hold whole chunks");
+  std::vector<PointChunk> point_chunks(kBlock / kChunkVertices);
+  for (std::size_t start = 0; start < vertex_count; start += kBlock) {
+    const std::size_t end = std::min(vertex_count, start + kBlock);
+    const std::size_t n = (end - start + kChunkVertices - 1) / kChunkVertices;
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
+      PointChunk& chunk = point_chunks[j];
+      chunk.clear();
+      const std::size_t first = start + j * kChunkVertices, last = std::min(end, first + kChunkVertices);
+      for (std::size_t v = first; v < last; ++v) {
         std::uint32_t cell;
         std::uint64_t q;
         unpack(packed[v], cell, q);
-        if (cell - lo >= span) continue;
-        if (sums.points[cell] != std::numeric_limits<std::uint32_t>::max()) {
-          ++sums.points[cell];
-          sums.point_sum[cell] += dequantize(q).cast<float>();
-        }
-        if (normals) cells.normal_sum[cell] += vertices.normals[v];
+        const std::uint32_t s = chunk.slot(cell, normals, colors, uvs);
+        ++chunk.points[s];
+        chunk.point_sum[s] += dequantize(q).cast<float>();
+        if (normals) chunk.normal_sum[s] += vertices.normals[v];
         if (colors) {
-          for (int c = 0; c < 4; ++c) cells.color_sum[cell][c] += vertices.colors[v][c];
+          for (int c = 0; c < 4; ++c) chunk.color_sum[s][c] += vertices.colors[v][c];
         }
-        if (uvs) cells.uv_sum[cell] += vertices.uvs[v].cast<double>();
+        if (uvs) chunk.uv_sum[s] += vertices.uvs[v].cast<double>();
       }
+      chunk.sort_by_cell();
     });
+    merge_chunks(point_chunks.data(), n, count,
+                 [&](const PointChunk& chunk, std::uint32_t s, std::uint32_t cell) {
+                   // A cell's mean stays that of the vertices counted, should its count ever saturate.
+                   if (sums.points[cell] <= std::numeric_limits<std::uint32_t>::max() - chunk.points[s]) {
+                     sums.points[cell] += chunk.points[s];
+                     sums.point_sum[cell] += chunk.point_sum[s];
+                   }
+                   if (normals) cells.normal_sum[cell] += chunk.normal_sum[s];
+                   if (colors) {
+                     for (int c = 0; c < 4; ++c) cells.color_sum[cell][c] += chunk.color_sum[s][c];
+                   }
+                   if (uvs) cells.uv_sum[cell] += chunk.uv_sum[s];
+                 });
     // These vertices are done with: hand their pages back now rather than when the whole array goes, so that
     // the sums above never sit in memory beside all of it.
     release_pages(positions.data() + start, positions.data() + end);
@@ -714,6 +907,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     if (colors) release_pages(vertices.colors.data() + start, vertices.colors.data() + end);
     if (uvs) release_pages(vertices.uvs.data() + start, vertices.uvs.data() + end);
   }
+  point_chunks = {};
   // The stream is exhausted: its vertex array (the largest block of memory in play) is no longer needed.
   vertices = IndexedMesh();
 
@@ -723,16 +917,38 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
 
 // ---- Triangle soups --------------------------------------------------------------------------------------
 
-struct SoupOwner {
-  CellMap map;
-  std::vector<CellKey> keys;
-  CellStore store;
-  TripleSet<CellKey> triangles;
-  std::uint64_t survived = 0;
+// One chunk of a triangle soup: partial sums of the cells it touches, by cell key, and its surviving
+// triangles.
+struct SoupChunk {
+  ChunkTable<CellKey> table;
+  std::vector<CellRecord> records;
+  std::vector<std::uint32_t> points;
+  std::vector<Vec3f> point_sum;
+  std::vector<CellTriple<CellKey>> survivors;
+
+  std::uint32_t slot(CellKey key) {
+    bool inserted;
+    const std::uint32_t s = table.slot(key, inserted);
+    if (inserted) {
+      records.emplace_back();
+      points.push_back(0);
+      point_sum.emplace_back(Vec3f::Zero());
+    }
+    return s;
+  }
+  Quadric& quadric(std::uint32_t s) { return records[s].quadric; }
+  BorderSums& border(std::uint32_t s) { return records[s].border; }
+  void touch(std::uint32_t) {}  // every cell of a chunk is touched; merging marks it
+  void clear() {
+    table.clear();
+    records.clear();
+    points.clear();
+    point_sum.clear();
+    survivors.clear();
+  }
 };
 
 FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
-  const unsigned owners = std::max(1u, options.threads);
   FineCells cells;
   cells.grid = options.grid;
   if (options.target_cells > 0 && cells.grid.level >= 0) {
@@ -743,111 +959,109 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     cells.grid = Grid::power_of_two(stream.bounds(), level);
   }
   const Grid grid = cells.grid;
-  // Owners hold blocks of cells (up to 16 blocks along an axis) so that most triangles have one owner.
-  int shift = 0;
-  while ((grid.along_longest >> shift) > 16) ++shift;
-  auto owner_of = [&](CellKey key) -> unsigned {
-    if (owners == 1) return 0;
-    const auto c = key_coords(key);
-    return static_cast<unsigned>(mix64(make_key(c[0] >> shift, c[1] >> shift, c[2] >> shift)) % owners);
-  };
-  std::vector<SoupOwner> state(owners);
-  cells.input_triangles = run_batches(
-      stream, owners, options.progress, [](const TriangleBatch&) {},
-      [&](const TriangleBatch& batch, unsigned owner) {
-        if (!batch.triangles.empty()) {
-          throw Error(stream.path(), {}, "a triangle soup stream delivered indexed triangles");
-        }
-        SoupOwner& me = state[owner];
-        for (const auto& corners : batch.corners) {
-          Facet f;
-          f.own = 0;
-          for (int k = 0; k < 3; ++k) {
-            f.p[k] = corners[k].cast<double>();
-            if (!f.p[k].allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
-            f.key[k] = grid.locate(f.p[k], f.local[k]);
-            f.index[k] = 0;
-            f.own |= static_cast<unsigned>(owner_of(f.key[k]) == owner) << k;
-          }
-          if (!f.own) continue;
-          for (int k = 0; k < 3; ++k) {
-            if (!(f.own & (1u << k))) continue;
-            bool inserted;
-            const std::uint32_t i =
-                me.map.insert(f.key[k], static_cast<std::uint32_t>(me.keys.size()), inserted);
-            f.index[k] = i;
-            if (inserted) {
-              check_cell_count(me.keys.size() + 1);
-              me.keys.push_back(f.key[k]);
-              me.store.push_back();
-            }
-            if (me.store.points[i] != std::numeric_limits<std::uint32_t>::max()) {
-              ++me.store.points[i];
-              me.store.point_sum[i] += f.local[k].cast<float>();
-            }
-          }
-          f.set_normal();
-          set_inverse_lengths(&f, 1);
-          contribute(f, me.store, grid, options.boundary);
-          const CellKey(&key)[3] = f.key;
-          if (key[0] != key[1] && key[1] != key[2] && key[2] != key[0]) {
-            const CellKey first = std::min(key[0], std::min(key[1], key[2]));
-            if (owner_of(first) == owner) {
-              me.triangles.add(CellTriple<CellKey>::of(key[0], key[1], key[2]));
-              ++me.survived;
-            }
-          }
-        }
-      });
-
-  // Number the cells of all owners in Morton order.
-  struct Entry {
-    std::uint64_t code;
-    std::uint32_t owner, index;
-  };
-  std::vector<Entry> entries;
-  for (unsigned t = 0; t < owners; ++t) {
-    for (std::uint32_t i = 0; i < state[t].keys.size(); ++i)
-      entries.push_back({morton(state[t].keys[i]), t, i});
-    cells.surviving_instances += state[t].survived;
-  }
-  check_cell_count(entries.size());
-  tbb::parallel_sort(entries.begin(), entries.end(),
-                     [](const Entry& a, const Entry& b) { return a.code < b.code; });
-  const std::size_t count = entries.size();
-  cells.keys.resize(count);
+  // The cells in order of first appearance, chunk by chunk: the numbering, like the sums, follows the input
+  // alone.
+  CellMap map;
+  std::vector<CellKey> keys;
   CellStore store;
-  store.records.resize(count);
-  store.points.resize(count);
-  store.point_sum.resize(count);
+  TripleSet<CellKey> survivors;
+  std::vector<SoupChunk> chunks;
+  cells.input_triangles = run_batches(stream, options.progress, [&](const TriangleBatch& batch) {
+    if (!batch.triangles.empty()) {
+      throw Error(stream.path(), {}, "a triangle soup stream delivered indexed triangles");
+    }
+    const std::size_t n = (batch.corners.size() + kChunkTriangles - 1) / kChunkTriangles;
+    if (chunks.size() < n) chunks.resize(n);
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
+      SoupChunk& chunk = chunks[j];
+      chunk.clear();
+      const std::size_t end = std::min(batch.corners.size(), (j + 1) * kChunkTriangles);
+      for (std::size_t i = j * kChunkTriangles; i < end; ++i) {
+        const auto& corners = batch.corners[i];
+        Facet f;
+        for (int k = 0; k < 3; ++k) {
+          f.p[k] = corners[k].cast<double>();
+          if (!f.p[k].allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
+          f.key[k] = grid.locate(f.p[k], f.local[k]);
+          const std::uint32_t s = chunk.slot(f.key[k]);
+          f.index[k] = s;
+          ++chunk.points[s];
+          chunk.point_sum[s] += f.local[k].cast<float>();
+        }
+        f.set_normal();
+        set_inverse_lengths(&f, 1);
+        contribute(f, chunk, grid, options.boundary);
+        const CellKey(&key)[3] = f.key;
+        if (key[0] != key[1] && key[1] != key[2] && key[2] != key[0]) {
+          chunk.survivors.push_back(CellTriple<CellKey>::of(key[0], key[1], key[2]));
+        }
+      }
+    });
+    // In chunk order, on one thread: the cells' numbers come from this map. A chunk touches few cells and
+    // keeps few triangles, next to the work of its triangles.
+    for (std::size_t j = 0; j < n; ++j) {
+      const SoupChunk& chunk = chunks[j];
+      const std::vector<CellKey>& ids = chunk.table.ids();
+      for (std::uint32_t s = 0; s < ids.size(); ++s) {
+        bool inserted;
+        const std::uint32_t i = map.insert(ids[s], static_cast<std::uint32_t>(keys.size()), inserted);
+        if (inserted) {
+          check_cell_count(keys.size() + 1);
+          keys.push_back(ids[s]);
+          store.push_back();
+        }
+        CellRecord& to = store.records[i];
+        to.quadric += chunk.records[s].quadric;
+        for (int a = 0; a < 3; ++a)
+          for (int c = 0; c < 4; ++c) to.border.slot[a][c] += chunk.records[s].border.slot[a][c];
+        store.touch(i);
+        if (store.points[i] <= std::numeric_limits<std::uint32_t>::max() - chunk.points[s]) {
+          store.points[i] += chunk.points[s];
+          store.point_sum[i] += chunk.point_sum[s];
+        }
+      }
+      for (const CellTriple<CellKey>& t : chunk.survivors) survivors.add(t);
+      cells.surviving_instances += chunk.survivors.size();
+    }
+  });
+  chunks = {};
+  map = CellMap();
+
+  // Number the cells in Morton order.
+  const std::size_t count = keys.size();
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries(count);
+  for (std::size_t i = 0; i < count; ++i) entries[i] = {morton(keys[i]), static_cast<std::uint32_t>(i)};
+  tbb::parallel_sort(entries.begin(), entries.end());
+  cells.keys.resize(count);
+  CellStore sorted;
+  sorted.records.resize(count);
+  sorted.points.resize(count);
+  sorted.point_sum.resize(count);
   CellMap numbering(count);
   for (std::size_t i = 0; i < count; ++i) {
-    const Entry& e = entries[i];
-    CellStore& from = state[e.owner].store;
-    cells.keys[i] = state[e.owner].keys[e.index];
-    store.records[i] = from.records[e.index];
-    store.points[i] = from.points[e.index];
-    store.point_sum[i] = from.point_sum[e.index];
+    const std::uint32_t from = entries[i].second;
+    cells.keys[i] = keys[from];
+    sorted.records[i] = store.records[from];
+    sorted.points[i] = store.points[from];
+    sorted.point_sum[i] = store.point_sum[from];
     bool inserted;
     numbering.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);
   }
   entries = {};
-  for (unsigned t = 0; t < owners; ++t) {
-    state[t].store = {};
-    state[t].map = CellMap();
-    std::vector<CellTriple<CellKey>> triples;
-    state[t].triangles.drain_into(triples);
-    for (const CellTriple<CellKey>& k : triples) {
-      const std::uint32_t a = numbering.find(k.first()), b = numbering.find(k.second()),
-                          c = numbering.find(k.third());
-      CellTriangle t3 = CellTriangle::of(a, b, c);
-      if (!k.seen_forward()) t3 = CellTriangle::of(a, c, b);
-      if (k.seen_forward() && k.seen_reversed()) t3.merge_flags(CellTriangle::of(a, c, b));
-      cells.triangles.push_back(t3);
-    }
+  keys = {};
+  store = {};
+  std::vector<CellTriple<CellKey>> triples;
+  survivors.drain_into(triples);
+  for (const CellTriple<CellKey>& k : triples) {
+    const std::uint32_t a = numbering.find(k.first()), b = numbering.find(k.second()),
+                        c = numbering.find(k.third());
+    CellTriangle t3 = CellTriangle::of(a, b, c);
+    if (!k.seen_forward()) t3 = CellTriangle::of(a, c, b);
+    if (k.seen_forward() && k.seen_reversed()) t3.merge_flags(CellTriangle::of(a, c, b));
+    cells.triangles.push_back(t3);
   }
   tbb::parallel_sort(cells.triangles.begin(), cells.triangles.end());
-  store.move_into(cells, options.boundary);
+  sorted.move_into(cells, options.boundary);
   return cells;
 }
 

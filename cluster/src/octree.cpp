@@ -5,7 +5,10 @@
 // parent. Two clusters at the same node may merge; the cost of a merge is the increase of quadric error,
 // E(a + b) - E(a) - E(b), with E a cluster's placement quadric at its representative. A priority queue
 // takes the cheapest merge first, one pair at a time, so the cluster count steps down by exactly one.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <functional>
 #include <memory>
 #include <queue>
 
@@ -226,11 +229,11 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   std::vector<double> error(n);
   std::vector<std::uint32_t> version(n, 0), union_of(n);
   std::vector<std::uint8_t> alive(n, 1);
-  for (std::size_t i = 0; i < n; ++i) {
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
     sums[i] = cell_placement_sums(cells, i, boundary_weight);
     error[i] = place(sums[i], representative).error;
     union_of[i] = static_cast<std::uint32_t>(i);
-  }
+  });
   // The octants of its node that each cluster covers. Two clusters are neighbours when an octant of one
   // shares a face with an octant of the other (the octant numbers differ in one bit).
   std::vector<std::uint8_t> octants(n, 0);
@@ -245,13 +248,26 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     return near;
   }();
   std::priority_queue<Candidate> queue;
-  auto push = [&](std::uint32_t a, std::uint32_t b) {
-    if (a > b) std::swap(a, b);
+  auto cost_of = [&](std::uint32_t a, std::uint32_t b, bool detached) {
     PlacementSums merged = sums[a];
     merged.add(sums[b]);
-    double cost = place(merged, representative).error - error[a] - error[b];
-    if (!(kNeighbours[octants[a]] & octants[b])) cost *= kDetachedPenalty;
-    queue.push({cost, a, b, version[a], version[b]});
+    const double cost = place(merged, representative).error - error[a] - error[b];
+    return detached ? cost * kDetachedPenalty : cost;
+  };
+  // While the tree is first filled, pairs are only listed; their costs (a placement each, most of the
+  // merge's arithmetic) are then taken in parallel and the queue is heapified from them at once. The pairs
+  // are distinct and the order is total, so it pops exactly as if each had been pushed as it came.
+  bool listing = true;
+  std::vector<Candidate> listed;
+  auto push = [&](std::uint32_t a, std::uint32_t b) {
+    if (a > b) std::swap(a, b);
+    // The octant masks change as clusters move up: the neighbour test is of this moment.
+    const bool detached = !(kNeighbours[octants[a]] & octants[b]);
+    if (listing) {
+      listed.push_back({detached ? 1.0 : 0.0, a, b, version[a], version[b]});  // cost: the flag, for now
+      return;
+    }
+    queue.push({cost_of(a, b, detached), a, b, version[a], version[b]});
   };
   std::vector<std::uint32_t> at(n, kEnd);  // the node a live cluster sits at (kEnd: the root's level)
   // Cluster c is the whole of a child of `node`: it joins the node's members, pairing with each, and while
@@ -273,6 +289,12 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   };
   for (std::size_t i = 0; i < n; ++i) arrive(static_cast<std::uint32_t>(i), cell_node[i], cell_octant[i]);
   cell_node = {};
+  tbb::parallel_for(std::size_t{0}, listed.size(), [&](std::size_t k) {
+    Candidate& c = listed[k];
+    c.cost = cost_of(c.a, c.b, c.cost != 0.0);
+  });
+  queue = std::priority_queue<Candidate>(std::less<Candidate>(), std::move(listed));
+  listing = false;
 
   std::unique_ptr<FaceTracker> faces;
   std::vector<std::uint32_t> label;

@@ -16,9 +16,7 @@ constexpr double kTruncation = 1e-3;
 // from the cutoff it is Lindstrom's truncated solve; near it, unlike a hard cutoff, it varies continuously
 // with the quadric, so sums taken in another order (a shuffled input) cannot flip a direction in or out and
 // move the vertex by a visible step.
-Vec3d damped_step(const Eigen::Matrix3d& m, const Vec3d& g, double tau) {
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-  solver.computeDirect(m);
+Vec3d damped_step(const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>& solver, const Vec3d& g, double tau) {
   const Vec3d values = solver.eigenvalues();
   const Eigen::Matrix3d vectors = solver.eigenvectors();
   Vec3d step = Vec3d::Zero();
@@ -29,6 +27,11 @@ Vec3d damped_step(const Eigen::Matrix3d& m, const Vec3d& g, double tau) {
     step -= v * (v.dot(g) * l / (l * l + tau * tau));
   }
   return step;
+}
+Vec3d damped_step(const Eigen::Matrix3d& m, const Vec3d& g, double tau) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(m);
+  return damped_step(solver, g, tau);
 }
 
 double largest_eigenvalue(const Eigen::Matrix3d& a) {
@@ -49,9 +52,12 @@ bool outside_by_more_than_its_size(const Vec3d& p, const Box3& box) {
 
 Vec3d minimize_damped(const Quadric& q, const Vec3d& origin) {
   const Eigen::Matrix3d a = q.a();
-  const double tau = kTruncation * largest_eigenvalue(a);
+  // One decomposition serves the cutoff and the step: the octree places a cluster per candidate merge.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(a);
+  const double tau = kTruncation * solver.eigenvalues().cwiseAbs().maxCoeff();
   if (!(tau > 0.0) || !std::isfinite(tau)) return origin;
-  return origin + damped_step(a, a * origin + q.b(), tau);
+  return origin + damped_step(solver, a * origin + q.b(), tau);
 }
 
 Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, const Quadric& surface,

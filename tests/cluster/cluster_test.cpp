@@ -351,6 +351,30 @@ TEST(Cluster, ThreadCountDoesNotChangeABit) {
   }
 }
 
+// Batches of many chunks (a chunk is 8192 triangles), so that chunks really run side by side and their
+// partial sums are merged: every thread count must still give the same bytes, for indexed input and soups.
+TEST(Cluster, ChunksMergeInChunkOrderForAnyThreadCount) {
+  IndexedMesh mesh = tilted(test::sphere(6));
+  ASSERT_GT(mesh.face_count(), 3 * 8192u);
+  // Scatter a fifth of the triangles so that chunks share cells and a cell's sum spans several chunks.
+  std::mt19937 random(11);
+  std::shuffle(mesh.triangles.begin(), mesh.triangles.begin() + mesh.triangles.size() / 5, random);
+  for (bool soup : {false, true}) {
+    for (ClusterOptions options : {grid_options(40), grid_options(7, Representative::mean)}) {
+      auto clustered = [&](unsigned threads) {
+        options.threads = threads;
+        auto stream = make_mesh_stream(mesh, soup, 1 << 16);
+        return cluster(*stream, options);
+      };
+      const QuadricMesh one = clustered(1);
+      ASSERT_GT(one.mesh.face_count(), 0u);
+      for (unsigned threads : {2u, 3u, 7u}) {
+        EXPECT_TRUE(same_bytes(one, clustered(threads))) << threads << " threads, soup " << soup;
+      }
+    }
+  }
+}
+
 TEST(Cluster, ShufflingTrianglesChangesNothingButRounding) {
   const IndexedMesh mesh = lumpy_sphere_with_holes();
   IndexedMesh shuffled = mesh;
