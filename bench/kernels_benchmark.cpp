@@ -20,6 +20,8 @@
 #include <random>
 #include <vector>
 
+#include "grid.h"  // cluster/src: the cell grid and hash tables are the cluster module's internals
+#include "hash.h"
 #include "ocsimp/cluster/cluster.h"
 #include "ocsimp/core/quadric.h"
 #include "ocsimp/decimate/decimate.h"
@@ -116,6 +118,49 @@ void BM_Minimize(benchmark::State& state) {
   state.SetLabel("rank " + std::to_string(rank));
 }
 BENCHMARK(BM_Minimize)->Arg(1)->Arg(2)->Arg(3);
+
+// Cell hashing, the clustering pass's bottleneck (BASELINES.md): each vertex of a 1M-triangle scan located on
+// a G^3 grid over its box and its cell key looked up in the open-addressing cell table, in the reader's
+// vertex order. args = grid cells along the longest axis, mode (0: locate only; 1: locate + insert into a
+// table pre-sized for the occupied cells; 2: locate + find in the filled table). items/s = vertices/s.
+void BM_CellHash(benchmark::State& state) {
+  using namespace cluster_detail;
+  static const IndexedMesh mesh = scan(1'000'000);
+  Box3 box;
+  for (const Vec3f& p : mesh.positions) box.add(p);
+  const Grid grid = Grid::uniform(box, static_cast<std::uint32_t>(state.range(0)));
+  const int mode = static_cast<int>(state.range(1));
+  KeySet occupied;
+  for (const Vec3f& p : mesh.positions) occupied.insert(grid.locate(p.cast<double>()));
+  CellMap filled(occupied.size());
+  {
+    bool inserted = false;
+    std::uint32_t next = 0;
+    occupied.for_each([&](CellKey key) { filled.insert(key, next++, inserted); });
+  }
+  for (auto _ : state) {
+    std::uint64_t sum = 0;
+    if (mode == 1) {
+      CellMap map(occupied.size());
+      bool inserted = false;
+      std::uint32_t next = 0;
+      for (const Vec3f& p : mesh.positions) {
+        sum += map.insert(grid.locate(p.cast<double>()), next, inserted);
+        next += inserted;
+      }
+    } else {
+      for (const Vec3f& p : mesh.positions) {
+        const CellKey key = grid.locate(p.cast<double>());
+        sum += mode == 0 ? key : filled.find(key);
+      }
+    }
+    benchmark::DoNotOptimize(sum);
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * mesh.positions.size()));
+  state.counters["cells"] = double(occupied.size());
+  state.SetLabel(mode == 0 ? "locate" : mode == 1 ? "locate+insert" : "locate+find");
+}
+BENCHMARK(BM_CellHash)->ArgsProduct({{256, 1024}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
 
 // cluster() per input triangle: args = triangles, grid cells along the longest axis, representative
 // (0 quadric, 1 mean). Only the cluster() call is timed (manual time); the stream over a copy of the mesh is
