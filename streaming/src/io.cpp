@@ -121,7 +121,11 @@ FileFormat detect_format(const std::string& path) {
 }
 
 std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path, const ReadOptions& options) {
-  switch (detect_format(path)) {
+  const FileFormat format = detect_format(path);
+  if (options.memory_budget > 0 && !options.vertex_sink) {
+    if (auto stream = detail::open_within_budget(path, format, options)) return stream;
+  }
+  switch (format) {
     case FileFormat::ply:
       return detail::open_ply_stream(path, options);
     case FileFormat::obj:

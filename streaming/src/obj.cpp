@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <string>
 #include <string_view>
@@ -70,7 +71,8 @@ class ObjStream final : public TriangleStream {
       : reader_(path),
         lines_(reader_),
         capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
-        progress_(options.progress) {
+        progress_(options.progress),
+        vertex_sink_(options.vertex_sink) {
     load_records();
     passes_ = needs_attribute_pass_ ? 3 : 2;
     if (needs_attribute_pass_) {
@@ -193,7 +195,8 @@ class ObjStream final : public TriangleStream {
     }
     if (face_statements_ == 0) first_face_ = {reader_.file_size(), lines_.line_number() + 1, seen_};
     needs_attribute_pass_ = faces_have_slashes_ && (!uv_records_.empty() || !normal_records_.empty());
-    total_ = {vertices_.positions.size(), uv_records_.size(), normal_records_.size()};
+    flush_sink();
+    total_ = seen_;
   }
 
   // Up to `max` numbers into `values`; returns how many there were.
@@ -215,10 +218,15 @@ class ObjStream final : public TriangleStream {
     if (count != 3 && count != 4 && count != 6 && count != 7)
       fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
            " numbers)");
-    if (vertices_.positions.size() >= kNone) fail("more than 2^32-2 vertices");
+    if (seen_.v >= kNone) fail("more than 2^32-2 vertices");
     const Vec3f position(values[0], values[1], values[2]);
-    vertices_.positions.push_back(position);
     bounds_.add(position);
+    if (vertex_sink_) {
+      sink_buffer_.push_back(position);
+      if (sink_buffer_.size() == kSinkChunk) flush_sink();
+      return;
+    }
+    vertices_.positions.push_back(position);
     const bool has_color = count >= 6;
     if (has_color && vertices_.colors.empty())
       vertices_.colors.assign(vertices_.positions.size() - 1, Color{255, 255, 255, 255});
@@ -234,12 +242,14 @@ class ObjStream final : public TriangleStream {
     float values[3];
     const int count = parse_numbers(p, end, values, 3);
     if (count == 0) fail("a texture coordinate needs u [v [w]]");
+    if (vertex_sink_) return;  // out of core: positions only
     uv_records_.emplace_back(values[0], count > 1 ? values[1] : 0.0f);
   }
 
   void parse_normal(const char* p, const char* end) {
     float values[3];
     if (parse_numbers(p, end, values, 3) != 3) fail("a normal needs x y z");
+    if (vertex_sink_) return;
     normal_records_.emplace_back(values[0], values[1], values[2]);
   }
 
@@ -303,6 +313,12 @@ class ObjStream final : public TriangleStream {
     }
   }
 
+  void flush_sink() {
+    if (sink_buffer_.empty()) return;
+    vertex_sink_(sink_buffer_.data(), sink_buffer_.size());
+    sink_buffer_.clear();
+  }
+
   // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn.
   void assign_attributes() {
     const std::size_t n = vertices_.positions.size();
@@ -358,6 +374,10 @@ class ObjStream final : public TriangleStream {
   LineReader lines_;
   std::size_t capacity_;
   ProgressFn progress_;
+  // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
+  std::function<void(const Vec3f*, std::size_t)> vertex_sink_;
+  std::vector<Vec3f> sink_buffer_;
+  static constexpr std::size_t kSinkChunk = 1 << 16;
 
   IndexedMesh vertices_;
   Box3 bounds_;

@@ -22,6 +22,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <optional>
 
@@ -330,6 +331,7 @@ class PlyStream final : public TriangleStream {
   void load_fixed_vertices(const std::vector<std::size_t>& offsets);
   void load_vertex_records();
   void add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset);
+  void flush_vertices();
   void check_end_of_data();
   void report_progress(bool final = false);
 
@@ -343,6 +345,7 @@ class PlyStream final : public TriangleStream {
 
   detail::ByteReader reader_;
   ProgressFn progress_;
+  std::function<void(const Vec3f*, std::size_t)> vertex_sink_;  // out of core: vertices go there, not kept
   std::size_t capacity_;
   PlyHeader header_;
   bool ascii_ = false;
@@ -395,6 +398,7 @@ class PlyStream final : public TriangleStream {
 PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     : reader_(path, kBufferBytes),
       progress_(options.progress),
+      vertex_sink_(options.vertex_sink),
       capacity_(std::max<std::size_t>(options.batch_capacity, 1)) {
   header_ = parse_ply_header(reader_);
   ascii_ = header_.encoding == PlyEncoding::ascii;
@@ -780,7 +784,8 @@ void PlyStream::load_vertices() {
     current_record_ = remaining / min_record;
     fail_truncated();
   }
-  const std::size_t reserve = static_cast<std::size_t>(std::min(vertex_count_, remaining / min_record));
+  const std::size_t reserve =
+      vertex_sink_ ? 0 : static_cast<std::size_t>(std::min(vertex_count_, remaining / min_record));
   vertices_.positions.reserve(reserve);
   if (vertex_plan_.normals) vertices_.normals.reserve(reserve);
   if (vertex_plan_.colors) vertices_.colors.reserve(reserve);
@@ -845,7 +850,7 @@ void PlyStream::load_fixed_vertices(const std::vector<std::size_t>& offsets) {
       fields[2].slot == Slot::z && element.properties[0].type == PlyType::float32 &&
       element.properties[1].type == PlyType::float32 && element.properties[2].type == PlyType::float32;
   static_assert(sizeof(Vec3f) == 12);
-  if (bulk) vertices_.positions.resize(vertex_count_);
+  if (bulk && !vertex_sink_) vertices_.positions.resize(vertex_count_);
 
   std::uint64_t done = 0;
   Vec3f lo = Vec3f::Constant(std::numeric_limits<float>::infinity()), hi = -lo;
@@ -859,7 +864,8 @@ void PlyStream::load_fixed_vertices(const std::vector<std::size_t>& offsets) {
     const char* data = reader_.data();
     const std::uint64_t base = reader_.offset();
     if (bulk) {
-      float* out = vertices_.positions[done].data();
+      if (vertex_sink_) vertices_.positions.resize(n);
+      float* out = vertices_.positions[vertex_sink_ ? 0 : done].data();
       std::memcpy(out, data, n * record);
       const std::size_t bad = scan_points(out, n, lo.data(), hi.data());
       if (bad < n) {
@@ -881,6 +887,7 @@ void PlyStream::load_fixed_vertices(const std::vector<std::size_t>& offsets) {
     done += n;
     current_record_ = done;
     report_progress();
+    flush_vertices();
   }
   if (bulk && vertex_count_ > 0) {
     bounds_.add(lo);
@@ -904,8 +911,21 @@ void PlyStream::load_vertex_records() {
     }
     add_vertex(static_cast<std::size_t>(current_record_), values, offset);
     end_record();
-    if ((current_record_ & 0xfff) == 0) report_progress();
+    if ((current_record_ & 0xfff) == 0) {
+      report_progress();
+      flush_vertices();
+    }
   }
+  flush_vertices();
+}
+
+void PlyStream::flush_vertices() {
+  if (!vertex_sink_ || vertices_.positions.empty()) return;
+  vertex_sink_(vertices_.positions.data(), vertices_.positions.size());
+  vertices_.positions.clear();
+  vertices_.normals.clear();
+  vertices_.colors.clear();
+  vertices_.uvs.clear();
 }
 
 void PlyStream::check_end_of_data() {

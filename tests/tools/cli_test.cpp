@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdio>
@@ -13,7 +14,9 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
+#include "ocsimp/streaming/io.h"
 #include "test_support.h"
 
 namespace ocsimp {
@@ -61,7 +64,8 @@ TEST(Cli, HelpListsEveryCommandAndFlagDefaults) {
   test::TempDir dir;
   const CommandResult top = run("--help", dir);
   EXPECT_EQ(top.exit_code, 0);
-  for (const char* command : {"info", "convert", "gen"}) EXPECT_NE(top.out.find(command), std::string::npos) << command;
+  for (const char* command : {"info", "convert", "gen"})
+    EXPECT_NE(top.out.find(command), std::string::npos) << command;
   const CommandResult gen = run("gen --help", dir);
   EXPECT_EQ(gen.exit_code, 0);
   EXPECT_NE(gen.out.find("--triangles"), std::string::npos);
@@ -78,7 +82,8 @@ TEST(Cli, UnknownFlagIsAnError) {
 TEST(Cli, GenIsDeterministicAndInfoCountsIt) {
   test::TempDir dir;
   ASSERT_EQ(run("gen -q -o " + (dir / "a.ply") + " --triangles 20000 --seed 3", dir).exit_code, 0);
-  ASSERT_EQ(run("gen -q -o " + (dir / "b.ply") + " --triangles 20000 --seed 3 --threads 1", dir).exit_code, 0);
+  ASSERT_EQ(run("gen -q -o " + (dir / "b.ply") + " --triangles 20000 --seed 3 --threads 1", dir).exit_code,
+            0);
   ASSERT_EQ(run("gen -q -o " + (dir / "c.ply") + " --triangles 20000 --seed 4", dir).exit_code, 0);
   EXPECT_EQ(file_bytes(dir / "a.ply"), file_bytes(dir / "b.ply"));
   EXPECT_NE(file_bytes(dir / "a.ply"), file_bytes(dir / "c.ply"));
@@ -98,9 +103,10 @@ TEST(Cli, GenIsDeterministicAndInfoCountsIt) {
 TEST(Cli, BadInputGivesOneLineNamingTheFileAndExit2) {
   test::TempDir dir;
   const std::string bad = dir / "bad.ply";
-  std::ofstream(bad) << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                        "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n";
+  std::ofstream(bad)
+      << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+         "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+         "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n";
   const CommandResult r = run("info " + bad, dir);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(lines(r.err), 1u) << r.err;
@@ -155,6 +161,151 @@ TEST(Cli, InterruptedGenLeavesNoFile) {
   for (const auto& entry : std::filesystem::directory_iterator(dir.path)) {
     EXPECT_EQ(entry.path().filename().string().find("big.ply"), std::string::npos) << entry.path();
   }
+}
+
+std::vector<std::string> names_in(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) names.push_back(entry.path().filename());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+void expect_keys(const nlohmann::json& object, std::initializer_list<const char*> keys) {
+  for (const char* key : keys) EXPECT_TRUE(object.contains(key)) << key << " missing in " << object.dump();
+}
+
+TEST(Cli, LodWritesEachLevelWithItsCountAndAReport) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply";
+  ASSERT_EQ(run("gen -q --holes 2 --triangles 60000 -o " + scan, dir).exit_code, 0);
+  const CommandResult r = run("lod " + scan + " -o '" + (dir / "lod_{faces}.ply") +
+                                  "' --faces 20000,500,3001 --report " + (dir / "lod.json"),
+                              dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // Not a terminal: nothing but errors.
+  EXPECT_EQ(r.out, "");
+  EXPECT_EQ(r.err, "");
+  for (std::uint64_t faces : {20000u, 3001u, 500u}) {
+    EXPECT_EQ(read_mesh(dir / ("lod_" + std::to_string(faces) + ".ply")).face_count(), faces);
+  }
+  const nlohmann::json report = nlohmann::json::parse(file_bytes(dir / "lod.json"));
+  expect_keys(report,
+              {"command", "input", "output", "input_faces", "clustered", "out_of_core", "intermediate_faces",
+               "memory_limit_bytes", "peak_rss_bytes", "seconds", "max_error", "levels", "phases"});
+  EXPECT_EQ(report["command"], "lod");
+  EXPECT_EQ(report["input_faces"].get<std::uint64_t>(), read_mesh(scan).face_count());
+  ASSERT_EQ(report["levels"].size(), 3u);
+  const std::uint64_t expected[] = {20000, 3001, 500};
+  double previous = 0;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const nlohmann::json& level = report["levels"][i];
+    expect_keys(level, {"target_faces", "faces", "vertices", "file", "seconds", "max_error",
+                        "level_max_error", "target_reached", "stop"});
+    EXPECT_EQ(level["faces"].get<std::uint64_t>(), expected[i]);
+    EXPECT_EQ(level["file"], dir / ("lod_" + std::to_string(expected[i]) + ".ply"));
+    EXPECT_GE(level["max_error"].get<double>(), previous);
+    previous = level["max_error"].get<double>();
+  }
+  EXPECT_EQ(report["max_error"].get<double>(), previous);
+  ASSERT_GE(report["phases"].size(), 5u);  // open, read, three levels
+  for (const nlohmann::json& phase : report["phases"])
+    expect_keys(phase, {"name", "seconds", "triangles_in", "triangles_out", "peak_rss_bytes"});
+  EXPECT_EQ(report["phases"].back()["name"], "level 500");
+  EXPECT_EQ(report["phases"].back()["triangles_out"].get<std::uint64_t>(), 500u);
+}
+
+TEST(Cli, LodRefusesAPatternWithoutFacesForSeveralLevels) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply";
+  ASSERT_EQ(run("gen -q --triangles 5000 -o " + scan, dir).exit_code, 0);
+  const CommandResult r = run("lod " + scan + " -o " + (dir / "out.ply") + " --faces 1000,100", dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lines(r.err), 1u) << r.err;
+  EXPECT_NE(r.err.find("{faces}"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.ply"));
+  const CommandResult bad = run("lod " + scan + " -o " + (dir / "out.ply") + " --faces 1000,x", dir);
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(lines(bad.err), 1u) << bad.err;
+  // One level needs no {faces}.
+  EXPECT_EQ(run("lod " + scan + " -o " + (dir / "out.ply") + " --faces 1000", dir).exit_code, 0);
+  EXPECT_EQ(read_mesh(dir / "out.ply").face_count(), 1000u);
+}
+
+TEST(Cli, SimplifyReportHasTheDocumentedFields) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply";
+  ASSERT_EQ(run("gen -q --holes 1 --triangles 40000 -o " + scan, dir).exit_code, 0);
+  const CommandResult r = run("simplify " + scan + " -o " + (dir / "out.obj") + " --faces 2000 --two-stage " +
+                                  "--memory-limit 256K --report " + (dir / "report.json"),
+                              dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, "");
+  EXPECT_EQ(read_mesh(dir / "out.obj").face_count(), 2000u);
+  const nlohmann::json report = nlohmann::json::parse(file_bytes(dir / "report.json"));
+  const auto fields = {
+      "command",         "input",     "output",      "input_faces",        "output_faces",
+      "output_vertices", "clustered", "out_of_core", "intermediate_faces", "memory_limit_bytes",
+      "peak_rss_bytes",  "seconds",   "max_error",   "target_reached",     "stop",
+      "reason",          "phases"};
+  expect_keys(report, fields);
+  EXPECT_EQ(report["output_faces"].get<std::uint64_t>(), 2000u);
+  EXPECT_TRUE(report["clustered"].get<bool>());
+  EXPECT_TRUE(report["out_of_core"].get<bool>());
+  EXPECT_EQ(report["memory_limit_bytes"].get<std::uint64_t>(), 256u << 10);
+  std::vector<std::string> phases;
+  for (const nlohmann::json& phase : report["phases"]) phases.push_back(phase["name"]);
+  EXPECT_EQ(phases, (std::vector<std::string>{"open", "cluster", "decimate", "write"}));
+  EXPECT_EQ(report["phases"][1]["triangles_in"].get<std::uint64_t>(),
+            report["input_faces"].get<std::uint64_t>());
+  // Every field is documented in the help.
+  const CommandResult help = run("simplify --help", dir);
+  for (const char* field : fields) EXPECT_NE(help.out.find(field), std::string::npos) << field;
+}
+
+// Starts `ocsimp args...` with TMPDIR set, kills it with `signal` after `delay`, and says whether the signal
+// is what ended it (it was still running).
+bool killed_mid_run(const std::vector<std::string>& args, const std::string& tmpdir, int signal,
+                    std::chrono::milliseconds delay) {
+  const pid_t child = fork();
+  if (child < 0) return false;
+  if (child == 0) {
+    ::setenv("TMPDIR", tmpdir.c_str(), 1);
+    std::vector<char*> argv;
+    argv.push_back(const_cast<char*>(kOcsimp.c_str()));
+    for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
+    argv.push_back(nullptr);
+    execv(kOcsimp.c_str(), argv.data());
+    _exit(127);
+  }
+  std::this_thread::sleep_for(delay);
+  kill(child, signal);
+  int status = 0;
+  waitpid(child, &status, 0);
+  return WIFSIGNALED(status) && WTERMSIG(status) == signal;
+}
+
+TEST(Cli, InterruptedSimplifyAndLodLeaveNoOutput) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply", tmp = dir / "tmp";
+  std::filesystem::create_directories(tmp);
+  ASSERT_EQ(run("gen -q --triangles 1500000 -o " + scan, dir).exit_code, 0);
+  const auto before = names_in(dir.path);
+
+  // SIGTERM: the AtomicFile handler removes its temporary too, so the folder is as it was.
+  EXPECT_TRUE(killed_mid_run({"simplify", "-q", scan, "-o", dir / "out.ply", "--faces", "1000"}, tmp, SIGTERM,
+                             std::chrono::milliseconds(400)));
+  EXPECT_EQ(names_in(dir.path), before);
+  // SIGKILL through the out-of-core path: the dereferencing files were unlinked when created, so TMPDIR is
+  // empty; an output temporary may remain, the output itself must not exist.
+  EXPECT_TRUE(killed_mid_run(
+      {"simplify", "-q", scan, "-o", dir / "out.ply", "--faces", "1000", "--memory-limit", "8M"}, tmp,
+      SIGKILL, std::chrono::milliseconds(400)));
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.ply"));
+  EXPECT_TRUE(names_in(tmp).empty());
+  EXPECT_TRUE(killed_mid_run({"lod", "-q", scan, "-o", dir / "lod_{faces}.ply", "--faces", "1000,100"}, tmp,
+                             SIGKILL, std::chrono::milliseconds(400)));
+  EXPECT_FALSE(std::filesystem::exists(dir / "lod_1000.ply"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "lod_100.ply"));
 }
 
 }  // namespace

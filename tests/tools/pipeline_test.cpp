@@ -73,7 +73,8 @@ TEST(Pipeline, RatioIsOfTheInputFaces) {
   const SimplifyResult in_core = simplify(path, options);
   options.two_stage = true;
   const SimplifyResult two_stage = simplify(path, options);
-  const auto expected = static_cast<std::size_t>(std::llround(0.05 * static_cast<double>(in_core.input_faces)));
+  const auto expected =
+      static_cast<std::size_t>(std::llround(0.05 * static_cast<double>(in_core.input_faces)));
   EXPECT_EQ(in_core.mesh.face_count(), expected);
   EXPECT_EQ(two_stage.mesh.face_count(), expected);
 }
@@ -113,6 +114,114 @@ TEST(Pipeline, CarriedQuadricsBeatQuadricsRebuiltFromTheIntermediate) {
     on_surface += gap < 1e-4f;
   }
   EXPECT_GE(on_surface, carried.vertex_count() * 8 / 10);
+}
+
+TEST(Pipeline, OutOfCoreGivesTheInMemorySoupResult) {
+  // A budget far below the vertex array (30k vertices, 360 kB) forces external dereferencing; the cluster
+  // stage must then see exactly the triangles it sees when the same mesh is streamed from memory as a soup.
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);
+  SimplifyOptions options;
+  options.target_faces = 3'000;
+  options.intermediate = 4;
+  options.memory_limit = 256 << 10;
+  const SimplifyResult result = simplify(path, options);
+  EXPECT_TRUE(result.out_of_core);
+  EXPECT_TRUE(result.clustered);
+  EXPECT_EQ(result.mesh.face_count(), 3'000u);
+
+  ClusterOptions cluster_options;
+  cluster_options.octree = true;
+  cluster_options.target_faces = 12'000;
+  ReadOptions read;
+  read.memory_budget = 48 << 10;
+  auto external = open_triangle_stream(path, read);
+  ASSERT_TRUE(dereferenced_out_of_core(*external));
+  ClusterStats external_stats;
+  const QuadricMesh from_disk = cluster(*external, cluster_options, &external_stats);
+  auto soup = make_mesh_stream(read_mesh(path), /*as_soup=*/true);
+  ClusterStats soup_stats;
+  const QuadricMesh from_memory = cluster(*soup, cluster_options, &soup_stats);
+  EXPECT_EQ(external_stats.input_triangles, soup_stats.input_triangles);
+  EXPECT_EQ(from_disk.mesh.positions, from_memory.mesh.positions);
+  EXPECT_EQ(from_disk.mesh.triangles, from_memory.mesh.triangles);
+  ASSERT_EQ(from_disk.quadrics.size(), from_memory.quadrics.size());
+  for (std::size_t i = 0; i < from_disk.quadrics.size(); ++i) {
+    EXPECT_EQ(from_disk.quadrics[i].evaluate(Vec3d(0.1, 0.2, 0.3)),
+              from_memory.quadrics[i].evaluate(Vec3d(0.1, 0.2, 0.3)));
+  }
+}
+
+TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);
+  LodOptions options;
+  options.level_faces = {500, 20'000, 3'001};
+  std::vector<std::size_t> seen;
+  options.on_level = [&](std::size_t level, const IndexedMesh& mesh) {
+    EXPECT_EQ(level, seen.size());
+    seen.push_back(mesh.face_count());
+  };
+  const LodResult result = lod(path, options);
+  ASSERT_EQ(result.levels.size(), 3u);
+  EXPECT_EQ(seen, (std::vector<std::size_t>{20'000, 3'001, 500}));
+  double previous = 0;
+  for (const LodLevel& level : result.levels) {
+    EXPECT_EQ(level.faces, level.target_faces);
+    EXPECT_TRUE(level.mesh.triangles.empty());  // handed to on_level, not kept
+    EXPECT_GE(level.max_error, previous);
+    EXPECT_GE(level.max_error, level.decimate.max_error);
+    previous = level.max_error;
+  }
+  EXPECT_GT(result.levels.back().max_error, result.levels.front().max_error);
+  EXPECT_FALSE(result.clustered);
+  EXPECT_EQ(result.input_faces, read_mesh(path).face_count());
+
+  // Through the clustering stage the counts are just as exact.
+  options.two_stage = true;
+  options.on_level = nullptr;
+  const LodResult clustered = lod(path, options);
+  EXPECT_TRUE(clustered.clustered);
+  for (const LodLevel& level : clustered.levels) EXPECT_EQ(level.mesh.face_count(), level.target_faces);
+}
+
+TEST(Lod, EachLevelIsTheDecimationOfThePreviousWithItsQuadricsCarried) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 40'000, 1);
+  LodOptions options;
+  options.level_faces = {8'000, 800};
+  const LodResult result = lod(path, options);
+  ASSERT_EQ(result.levels.size(), 2u);
+
+  DecimateOptions first;
+  first.target_faces = 8'000;
+  first.output_quadrics = true;
+  QuadricMesh input;
+  input.mesh = read_mesh(path);
+  DecimateResult level0 = decimate(input, first);
+  EXPECT_EQ(level0.mesh.triangles, result.levels[0].mesh.triangles);
+  DecimateOptions second;
+  second.target_faces = 800;
+  const DecimateResult carried = decimate(QuadricMesh{level0.mesh, level0.quadrics}, second);
+  EXPECT_EQ(carried.mesh.positions, result.levels[1].mesh.positions);
+  EXPECT_EQ(carried.mesh.triangles, result.levels[1].mesh.triangles);
+  EXPECT_EQ(carried.stats.max_error, result.levels[1].decimate.max_error);
+  EXPECT_EQ(result.levels[1].max_error, std::max(level0.stats.max_error, carried.stats.max_error));
+}
+
+TEST(Lod, RefusesBadLevelsAndPatterns) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 5'000);
+  LodOptions options;
+  EXPECT_THROW(lod(path, options), Error);
+  options.level_faces = {100, 0};
+  EXPECT_THROW(lod(path, options), Error);
+  options.level_faces = {100, 50, 100};
+  EXPECT_THROW(lod(path, options), Error);
+  EXPECT_EQ(lod_level_path("out_{faces}.ply", 1000, true), "out_1000.ply");
+  EXPECT_EQ(lod_level_path("{faces}/m{faces}.obj", 7, true), "7/m7.obj");
+  EXPECT_EQ(lod_level_path("single.ply", 7, false), "single.ply");
+  EXPECT_THROW(lod_level_path("single.ply", 7, true), Error);
 }
 
 TEST(Pipeline, RefusesMissingTargetsAndBadFiles) {

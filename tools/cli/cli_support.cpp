@@ -1,4 +1,4 @@
-// What the commands share: the progress bar and JSON reports.
+// What the commands share: the progress bar, timing, the summary table and JSON reports.
 #include <unistd.h>
 
 #include <chrono>
@@ -41,11 +41,11 @@ struct ProgressBar {
       for (int i = 0; i < 30; ++i) bar[i] = i < filled ? '#' : '.';
       bar[30] = 0;
       const double left = rate > 0 ? static_cast<double>(total - std::min(done, total)) / rate : 0.0;
-      std::snprintf(line, sizeof line, "\r%-10s [%s] %5.1f%%  %s/s  %4.0fs left ", phase.c_str(), bar,
-                    100.0 * fraction, human(rate).c_str(), left);
+      std::snprintf(line, sizeof line, "\r%-17s [%s] %5.1f%%  %s%s/s  %4.0fs left ", phase.c_str(), bar,
+                    100.0 * fraction, human(rate).c_str(), unit(phase), left);
     } else {
-      std::snprintf(line, sizeof line, "\r%-10s %s  %s/s ", phase.c_str(),
-                    human(static_cast<double>(done)).c_str(), human(rate).c_str());
+      std::snprintf(line, sizeof line, "\r%-17s %s%s  %s%s/s ", phase.c_str(),
+                    human(static_cast<double>(done)).c_str(), unit(phase), human(rate).c_str(), unit(phase));
     }
     std::fputs(line, stderr);
     line_open = true;
@@ -58,6 +58,15 @@ struct ProgressBar {
   }
 
   ~ProgressBar() { finish_line(); }
+
+  // What the stages count (core/system.h leaves units to the phase): readers and the cluster pass report
+  // bytes of input, the decimator collapses, writers faces.
+  static const char* unit(std::string_view phase) {
+    if (phase == "read" || phase == "cluster: faces" || phase.starts_with("dereference")) return "B";
+    if (phase == "decimate") return " collapses";
+    if (phase == "write" || phase == "generate") return " faces";
+    return "";
+  }
 
   static std::string human(double value) {
     char text[32];
@@ -81,6 +90,35 @@ ProgressFn make_progress(bool quiet) {
   return [bar](std::string_view phase, std::uint64_t done, std::uint64_t total) {
     bar->update(phase, done, total);
   };
+}
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+bool show_summary(bool quiet) {
+  return !quiet && ::isatty(STDOUT_FILENO);
+}
+
+void print_phase_table(const std::vector<PhaseReport>& phases) {
+  std::printf("%-14s %10s %14s %14s %12s\n", "phase", "seconds", "triangles in", "triangles out", "peak RSS");
+  for (const PhaseReport& p : phases) {
+    std::printf("%-14s %10.3f %14llu %14llu %12s\n", p.name.c_str(), p.seconds,
+                static_cast<unsigned long long>(p.triangles_in),
+                static_cast<unsigned long long>(p.triangles_out), format_bytes(p.peak_rss_bytes).c_str());
+  }
+}
+
+nlohmann::json phases_json(const std::vector<PhaseReport>& phases) {
+  nlohmann::json array = nlohmann::json::array();
+  for (const PhaseReport& p : phases) {
+    array.push_back({{"name", p.name},
+                     {"seconds", p.seconds},
+                     {"triangles_in", p.triangles_in},
+                     {"triangles_out", p.triangles_out},
+                     {"peak_rss_bytes", p.peak_rss_bytes}});
+  }
+  return array;
 }
 
 void write_json_report(const std::string& path, const nlohmann::json& report) {

@@ -2,10 +2,13 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "ocsimp/core/system.h"
+#include "ocsimp/tools/pipeline.h"
 
 namespace ocsimp::cli {
 
@@ -16,6 +19,7 @@ void add_compare_command(CLI::App& app);
 void add_cluster_command(CLI::App& app);
 void add_decimate_command(CLI::App& app);
 void add_simplify_command(CLI::App& app);
+void add_lod_command(CLI::App& app);
 void add_bench_command(CLI::App& app);
 
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
@@ -24,5 +28,16 @@ ProgressFn make_progress(bool quiet);
 
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
+
+double seconds_since(std::chrono::steady_clock::time_point start);
+
+// Whether the end-of-run summary goes to stdout: not with --quiet, and not on a pipe or file (where only
+// errors are written; --report gives the same numbers as JSON).
+bool show_summary(bool quiet);
+
+// The phases as the summary table (phase, time, triangles in and out, peak RSS) on stdout, and as the JSON
+// array of {name, seconds, triangles_in, triangles_out, peak_rss_bytes} the reports share.
+void print_phase_table(const std::vector<PhaseReport>& phases);
+nlohmann::json phases_json(const std::vector<PhaseReport>& phases);
 
 }  // namespace ocsimp::cli

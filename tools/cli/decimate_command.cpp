@@ -12,13 +12,6 @@
 #include "ocsimp/streaming/io.h"
 
 namespace ocsimp::cli {
-namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
 
 void add_decimate_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(

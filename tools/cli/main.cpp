@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   ocsimp::cli::add_cluster_command(app);
   ocsimp::cli::add_decimate_command(app);
   ocsimp::cli::add_simplify_command(app);
+  ocsimp::cli::add_lod_command(app);
   ocsimp::cli::add_bench_command(app);
   // New commands: add their registration above this line.
   try {

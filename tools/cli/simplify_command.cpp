@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
@@ -10,11 +11,32 @@
 #include "ocsimp/tools/pipeline.h"
 
 namespace ocsimp::cli {
+namespace {
+
+constexpr const char* kReportFields = R"(Report (--report FILE.json), one object:
+  command             "simplify"
+  input, output       the paths
+  input_faces         triangles read (polygons fan-triangulated)
+  output_faces        faces written; output_vertices likewise
+  clustered           whether the clustering stage ran (input over the in-core budget, or --two-stage)
+  out_of_core         whether the input's vertices were dereferenced on disk (their array did not fit what
+                      clustering leaves of the budget)
+  intermediate_faces  faces after clustering (0 when not clustered)
+  memory_limit_bytes  the budget in force; peak_rss_bytes the process's peak resident memory
+  seconds             wall time of the whole run
+  max_error           largest collapse cost applied, as a distance to the original surface in model units
+  target_reached, stop, reason   how the decimator stopped (see ocsimp decimate)
+  phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}] for open, read or
+                      cluster, decimate and write, in order)";
+
+}  // namespace
 
 void add_simplify_command(CLI::App& app) {
-  auto* cmd = app.add_subcommand("simplify",
-                                 "Simplify a mesh of any size: decimate in core when it fits the memory budget, "
-                                 "otherwise cluster in one streaming pass first and carry the quadrics on");
+  auto* cmd =
+      app.add_subcommand("simplify",
+                         "Simplify a mesh of any size: decimate in core when it fits the memory budget, "
+                         "otherwise cluster in one streaming pass first and carry the quadrics on");
+  cmd->footer(kReportFields);
   struct Flags {
     std::string input, output, report, memory_limit;
     SimplifyOptions options;
@@ -25,21 +47,26 @@ void add_simplify_command(CLI::App& app) {
   SimplifyOptions& o = flags->options;
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
-  cmd->add_option("--faces", o.target_faces, "Exact face count (N-1 where a closed manifold's parity forbids N)")
+  cmd->add_option("--faces", o.target_faces,
+                  "Exact face count (N-1 where a closed manifold's parity forbids N)")
       ->check(CLI::Range(std::uint64_t{1}, std::numeric_limits<std::uint64_t>::max()));
   cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
       ->check(CLI::Range(std::numeric_limits<double>::min(), 1.0));
   cmd->add_option("--max-error", o.max_error, "Largest collapse cost allowed, as a distance in model units")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--memory-limit", flags->memory_limit, "Peak memory budget, e.g. 2G (default: a third of RAM)");
+  cmd->add_option(
+      "--memory-limit", flags->memory_limit,
+      "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
+      "fit what clustering leaves of it (at least half) is dereferenced on disk under TMPDIR");
   cmd->add_flag("--two-stage", o.two_stage, "Cluster first even when the input fits in core");
-  cmd->add_option("--intermediate", o.intermediate,
-                  "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8)");
+  cmd->add_option(
+      "--intermediate", o.intermediate,
+      "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8)");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str();
-  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file");
+  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
-  cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors");
+  cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors (no progress bars, no summary)");
   cmd->callback([flags] {
     SimplifyOptions options = flags->options;
     if (options.target_faces == 0 && options.target_ratio == 0 && !std::isfinite(options.max_error)) {
@@ -47,55 +74,50 @@ void add_simplify_command(CLI::App& app) {
     }
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
-    options.progress = make_progress(flags->quiet);
+    const ProgressFn progress = make_progress(flags->quiet);
+    options.progress = progress;
     const auto start = std::chrono::steady_clock::now();
     SimplifyResult result = simplify(flags->input, options);
     const auto write_start = std::chrono::steady_clock::now();
     WriteOptions write;
     write.ascii = flags->ascii;
+    write.progress = progress;
     write_mesh(flags->output, result.mesh, write);
-    const auto end = std::chrono::steady_clock::now();
-    result.phases.push_back({"write", std::chrono::duration<double>(end - write_start).count(),
-                             result.mesh.face_count(), result.mesh.face_count(), peak_rss_bytes()});
-    const double total = std::chrono::duration<double>(end - start).count();
+    result.phases.push_back({"write", seconds_since(write_start), result.mesh.face_count(),
+                             result.mesh.face_count(), peak_rss_bytes()});
+    const double total = seconds_since(start);
 
-    nlohmann::json report;
-    report["input"] = flags->input;
-    report["output"] = flags->output;
-    report["input_faces"] = result.input_faces;
-    report["output_faces"] = result.mesh.face_count();
-    report["output_vertices"] = result.mesh.vertex_count();
-    report["clustered"] = result.clustered;
-    report["intermediate_faces"] = result.intermediate_faces;
-    report["memory_limit_bytes"] = result.memory_limit;
-    report["peak_rss_bytes"] = peak_rss_bytes();
-    report["seconds"] = total;
-    report["max_error"] = result.decimate.max_error;
-    report["target_reached"] = result.decimate.target_reached;
-    report["stop"] = stop_name(result.decimate.stop);
-    report["reason"] = result.decimate.reason;
-    report["phases"] = nlohmann::json::array();
-    for (const PhaseReport& p : result.phases) {
-      report["phases"].push_back({{"name", p.name},
-                                  {"seconds", p.seconds},
-                                  {"triangles_in", p.triangles_in},
-                                  {"triangles_out", p.triangles_out},
-                                  {"peak_rss_bytes", p.peak_rss_bytes}});
+    if (!flags->report.empty()) {
+      nlohmann::json report;
+      report["command"] = "simplify";
+      report["input"] = flags->input;
+      report["output"] = flags->output;
+      report["input_faces"] = result.input_faces;
+      report["output_faces"] = result.mesh.face_count();
+      report["output_vertices"] = result.mesh.vertex_count();
+      report["clustered"] = result.clustered;
+      report["out_of_core"] = result.out_of_core;
+      report["intermediate_faces"] = result.intermediate_faces;
+      report["memory_limit_bytes"] = result.memory_limit;
+      report["peak_rss_bytes"] = peak_rss_bytes();
+      report["seconds"] = total;
+      report["max_error"] = result.decimate.max_error;
+      report["target_reached"] = result.decimate.target_reached;
+      report["stop"] = stop_name(result.decimate.stop);
+      report["reason"] = result.decimate.reason;
+      report["phases"] = phases_json(result.phases);
+      write_json_report(flags->report, report);
     }
-    if (!flags->report.empty()) write_json_report(flags->report, report);
-    if (!flags->quiet) {
-      std::printf("%-10s %10s %14s %14s %12s\n", "phase", "seconds", "triangles in", "triangles out", "peak RSS");
-      for (const PhaseReport& p : result.phases) {
-        std::printf("%-10s %10.3f %14llu %14llu %12s\n", p.name.c_str(), p.seconds,
-                    static_cast<unsigned long long>(p.triangles_in), static_cast<unsigned long long>(p.triangles_out),
-                    format_bytes(p.peak_rss_bytes).c_str());
-      }
-      std::printf("%-10s %10.3f   %s -> %s: %zu faces, max collapse error %.6g%s\n", "total", total,
-                  flags->input.c_str(), flags->output.c_str(), result.mesh.face_count(), result.decimate.max_error,
-                  result.clustered ? " (clustered first)" : "");
-      if (!result.decimate.target_reached && !result.decimate.reason.empty()) {
-        std::printf("note: %s\n", result.decimate.reason.c_str());
-      }
+    if (!result.decimate.target_reached && !result.decimate.reason.empty()) {
+      std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", result.decimate.reason.c_str());
+    }
+    if (show_summary(flags->quiet)) {
+      print_phase_table(result.phases);
+      std::printf("%-14s %10.3f   %s -> %s: %zu faces, max error %.6g (distance)%s%s, peak RSS %s\n", "total",
+                  total, flags->input.c_str(), flags->output.c_str(), result.mesh.face_count(),
+                  result.decimate.max_error, result.clustered ? ", clustered first" : "",
+                  result.out_of_core ? ", vertices dereferenced on disk" : "",
+                  format_bytes(peak_rss_bytes()).c_str());
     }
   });
 }

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
+#include <limits>
+#include <memory>
 
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/io.h"
@@ -19,102 +22,237 @@ constexpr double kMaxIntermediate = 8.0;
 
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// What the first stage leaves for the decimator, and what the run learned on the way.
+struct FirstStage {
+  QuadricMesh mesh;
+  bool clustered = false;
+  bool out_of_core = false;
+  std::uint64_t input_faces = 0;
+  std::uint64_t intermediate_faces = 0;
+  std::vector<PhaseReport> phases;
+  ClusterStats cluster;
+  std::uint64_t memory_limit = 0;
+  // The decimator's targets: in core the ratio is left to the decimator, which applies it to the exact face
+  // count it sees; after clustering it is resolved against the input's count here.
+  std::uint64_t target_faces = 0;
+  double target_ratio = 0;
+};
+
+FirstStage first_stage(const std::string& input_path, const SimplifyOptions& options) {
+  FirstStage stage;
+  stage.memory_limit = effective_memory_limit(options.memory_limit);
+  const double budget = static_cast<double>(stage.memory_limit);
+
+  auto start = Clock::now();
+  ReadOptions read;
+  read.progress = options.progress;
+  // The vertex array may take what clustering to twice the target leaves of the budget (at least half of
+  // it); past that the reader dereferences the faces on disk and the stream delivers triangle soups, which
+  // the cluster stage takes with memory bounded by its cells.
+  const double per_target_face_cluster = kClusterBytesPerCell * options.cluster.fine_cells_per_target / 2.0;
+  const double cluster_reserve =
+      options.target_faces > 0 ? 2.0 * per_target_face_cluster * static_cast<double>(options.target_faces)
+                               : budget / 2;
+  read.memory_budget = static_cast<std::uint64_t>(budget - std::min(budget / 2, cluster_reserve));
+  std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
+  stage.out_of_core = dereferenced_out_of_core(*stream);
+  const double vertex_bytes = static_cast<double>(stream->vertices().positions.size()) * 12.0;
+  // OBJ does not say its face count up front; its size does, roughly (at least ~20 bytes a face line).
+  std::uint64_t faces_hint = stream->triangles_hint();
+  if (faces_hint == 0) faces_hint = stream->bytes_total() / 40;
+  stage.input_faces = faces_hint;
+  stage.phases.push_back({"open", seconds_since(start), 0, 0, peak_rss_bytes()});
+
+  std::uint64_t target = options.target_faces;
+  if (options.target_ratio > 0) {
+    const auto by_ratio =
+        static_cast<std::uint64_t>(std::llround(options.target_ratio * static_cast<double>(faces_hint)));
+    target = target > 0 ? std::min(target, std::max<std::uint64_t>(by_ratio, 1))
+                        : std::max<std::uint64_t>(by_ratio, 1);
+  }
+
+  const double in_core_bytes = vertex_bytes + kInCoreBytesPerFace * static_cast<double>(faces_hint);
+  const bool in_core = !options.two_stage && !stage.out_of_core && in_core_bytes <= budget;
+  if (in_core) {
+    start = Clock::now();
+    stage.mesh.mesh = read_mesh(*stream);
+    stream.reset();
+    stage.input_faces = stage.mesh.mesh.face_count();
+    stage.phases.push_back(
+        {"read", seconds_since(start), stage.input_faces, stage.input_faces, peak_rss_bytes()});
+    stage.target_faces = options.target_faces;
+    stage.target_ratio = options.target_ratio;
+    return stage;
+  }
+  // Intermediate size: a few times the target, as large as both stages' memory allows.
+  const double cluster_room = std::max(0.0, budget - vertex_bytes) / per_target_face_cluster;
+  const double decimate_room = budget / kInCoreBytesPerFace;
+  const double room = std::min(cluster_room, decimate_room);
+  std::uint64_t intermediate_faces;
+  if (target > 0) {
+    const double multiple =
+        options.intermediate > 0
+            ? options.intermediate
+            : std::clamp(std::floor(room / static_cast<double>(target)), 1.0, kMaxIntermediate);
+    intermediate_faces = static_cast<std::uint64_t>(multiple * static_cast<double>(target));
+  } else {
+    intermediate_faces = static_cast<std::uint64_t>(std::max(room, 1000.0));
+  }
+  intermediate_faces = std::min(intermediate_faces, faces_hint);
+  ClusterOptions cluster_options = options.cluster;
+  cluster_options.octree = true;
+  cluster_options.target_vertices = 0;
+  cluster_options.target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
+  cluster_options.threads = static_cast<unsigned>(std::max(options.threads, 0));
+  cluster_options.progress = options.progress;
+  start = Clock::now();
+  stage.mesh = cluster(*stream, cluster_options, &stage.cluster);
+  stream.reset();
+  stage.clustered = true;
+  stage.input_faces = stage.cluster.input_triangles;
+  stage.intermediate_faces = stage.mesh.mesh.face_count();
+  stage.phases.push_back(
+      {"cluster", seconds_since(start), stage.input_faces, stage.intermediate_faces, peak_rss_bytes()});
+  if (options.target_ratio > 0) {
+    target = std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::llround(
+                                            options.target_ratio * static_cast<double>(stage.input_faces))));
+    if (options.target_faces > 0) target = std::min(target, options.target_faces);
+  }
+  stage.target_faces = target;
+  stage.target_ratio = 0;
+  return stage;
+}
+
+void check_common(const SimplifyOptions& options) {
+  if (options.target_ratio < 0 || options.target_ratio > 1) throw Error("--ratio must be in (0, 1]");
+  if (options.intermediate != 0 && options.intermediate < 1) throw Error("--intermediate must be at least 1");
+}
 
 }  // namespace
+
+std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
+  return memory_limit > 0 ? memory_limit : physical_memory_bytes() / 3;
+}
 
 SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& options) {
   const bool has_count = options.target_faces > 0 || options.target_ratio > 0;
   if (!has_count && !std::isfinite(options.max_error)) {
     throw Error("simplify needs a target: a face count, a ratio or a maximum error");
   }
-  if (options.target_ratio < 0 || options.target_ratio > 1) throw Error("--ratio must be in (0, 1]");
-  if (options.intermediate != 0 && options.intermediate < 1) throw Error("--intermediate must be at least 1");
+  check_common(options);
 
+  FirstStage stage = first_stage(input_path, options);
   SimplifyResult result;
-  result.memory_limit = options.memory_limit > 0 ? options.memory_limit : physical_memory_bytes() / 3;
-  const double budget = static_cast<double>(result.memory_limit);
-
-  auto start = Clock::now();
-  ReadOptions read;
-  read.progress = options.progress;
-  std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
-  const double vertex_bytes = static_cast<double>(stream->vertices().positions.size()) * 12.0;
-  // OBJ does not say its face count up front; its size does, roughly (at least ~20 bytes a face line).
-  std::uint64_t faces_hint = stream->triangles_hint();
-  if (faces_hint == 0) faces_hint = stream->bytes_total() / 40;
-  result.input_faces = faces_hint;
-  result.phases.push_back({"open", seconds_since(start), 0, 0, peak_rss_bytes()});
-
-  std::uint64_t target = options.target_faces;
-  if (options.target_ratio > 0) {
-    const auto by_ratio = static_cast<std::uint64_t>(std::llround(options.target_ratio * static_cast<double>(faces_hint)));
-    target = target > 0 ? std::min(target, std::max<std::uint64_t>(by_ratio, 1)) : std::max<std::uint64_t>(by_ratio, 1);
-  }
+  result.clustered = stage.clustered;
+  result.out_of_core = stage.out_of_core;
+  result.input_faces = stage.input_faces;
+  result.intermediate_faces = stage.intermediate_faces;
+  result.phases = std::move(stage.phases);
+  result.cluster = stage.cluster;
+  result.memory_limit = stage.memory_limit;
 
   DecimateOptions decimate_options = options.decimate;
   decimate_options.max_error = options.max_error;
   decimate_options.threads = options.threads;
   decimate_options.progress = options.progress;
+  decimate_options.target_faces = stage.target_faces;
+  decimate_options.target_ratio = stage.target_ratio;
 
-  const double in_core_bytes = vertex_bytes + kInCoreBytesPerFace * static_cast<double>(faces_hint);
-  const bool in_core = !options.two_stage && in_core_bytes <= budget;
-  QuadricMesh intermediate;
-  if (in_core) {
-    start = Clock::now();
-    intermediate.mesh = read_mesh(*stream);
-    stream.reset();
-    result.input_faces = intermediate.mesh.face_count();
-    result.phases.push_back({"read", seconds_since(start), result.input_faces, result.input_faces, peak_rss_bytes()});
-    // The decimator applies the ratio to the exact face count it sees.
-    decimate_options.target_faces = options.target_faces;
-    decimate_options.target_ratio = options.target_ratio;
-  } else {
-    // Intermediate size: a few times the target, as large as both stages' memory allows.
-    const double per_target_face_cluster = kClusterBytesPerCell * options.cluster.fine_cells_per_target / 2.0;
-    const double cluster_room = std::max(0.0, budget - vertex_bytes) / per_target_face_cluster;
-    const double decimate_room = budget / kInCoreBytesPerFace;
-    const double room = std::min(cluster_room, decimate_room);
-    std::uint64_t intermediate_faces;
-    if (target > 0) {
-      double multiple = options.intermediate > 0 ? options.intermediate
-                                                 : std::clamp(std::floor(room / static_cast<double>(target)), 1.0,
-                                                              kMaxIntermediate);
-      intermediate_faces = static_cast<std::uint64_t>(multiple * static_cast<double>(target));
-    } else {
-      intermediate_faces = static_cast<std::uint64_t>(std::max(room, 1000.0));
-    }
-    intermediate_faces = std::min(intermediate_faces, faces_hint);
-    ClusterOptions cluster_options = options.cluster;
-    cluster_options.octree = true;
-    cluster_options.target_vertices = 0;
-    cluster_options.target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
-    cluster_options.threads = static_cast<unsigned>(std::max(options.threads, 0));
-    cluster_options.progress = options.progress;
-    start = Clock::now();
-    intermediate = cluster(*stream, cluster_options, &result.cluster);
-    stream.reset();
-    result.clustered = true;
-    result.input_faces = result.cluster.input_triangles;
-    result.intermediate_faces = intermediate.mesh.face_count();
-    result.phases.push_back(
-        {"cluster", seconds_since(start), result.input_faces, result.intermediate_faces, peak_rss_bytes()});
-    if (options.target_ratio > 0) {
-      target = std::max<std::uint64_t>(
-          1, static_cast<std::uint64_t>(std::llround(options.target_ratio * static_cast<double>(result.input_faces))));
-      if (options.target_faces > 0) target = std::min(target, options.target_faces);
-    }
-    decimate_options.target_faces = target;
-    decimate_options.target_ratio = 0;
-  }
-
-  start = Clock::now();
-  const std::uint64_t decimate_in = intermediate.mesh.face_count();
-  DecimateResult decimated = decimate(std::move(intermediate), decimate_options);
+  const auto start = Clock::now();
+  const std::uint64_t decimate_in = stage.mesh.mesh.face_count();
+  DecimateResult decimated = decimate(std::move(stage.mesh), decimate_options);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
-  result.phases.push_back({"decimate", seconds_since(start), decimate_in, result.mesh.face_count(), peak_rss_bytes()});
+  result.phases.push_back(
+      {"decimate", seconds_since(start), decimate_in, result.mesh.face_count(), peak_rss_bytes()});
   return result;
+}
+
+LodResult lod(const std::string& input_path, const LodOptions& options) {
+  if (options.level_faces.empty()) throw Error("lod needs at least one level (--faces N,M,...)");
+  std::vector<std::uint64_t> levels = options.level_faces;
+  std::sort(levels.begin(), levels.end(), std::greater<>());
+  if (levels.back() == 0) throw Error("lod: a level of 0 faces");
+  if (std::adjacent_find(levels.begin(), levels.end()) != levels.end()) {
+    throw Error("lod: the level " + std::to_string(*std::adjacent_find(levels.begin(), levels.end())) +
+                " is given twice");
+  }
+
+  SimplifyOptions first;
+  first.target_faces = levels.front();
+  first.memory_limit = options.memory_limit;
+  first.two_stage = options.two_stage;
+  first.intermediate = options.intermediate;
+  first.cluster = options.cluster;
+  first.threads = options.threads;
+  first.progress = options.progress;
+  check_common(first);
+  FirstStage stage = first_stage(input_path, first);
+
+  LodResult result;
+  result.clustered = stage.clustered;
+  result.out_of_core = stage.out_of_core;
+  result.input_faces = stage.input_faces;
+  result.intermediate_faces = stage.intermediate_faces;
+  result.phases = std::move(stage.phases);
+  result.cluster = stage.cluster;
+  result.memory_limit = stage.memory_limit;
+
+  QuadricMesh input = std::move(stage.mesh);
+  double max_error = 0;
+  for (std::size_t i = 0; i < levels.size(); ++i) {
+    const auto start = Clock::now();
+    DecimateOptions decimate_options = options.decimate;
+    decimate_options.target_faces = levels[i];
+    decimate_options.target_vertices = 0;
+    decimate_options.target_ratio = 0;
+    decimate_options.max_error = std::numeric_limits<double>::infinity();
+    decimate_options.threads = options.threads;
+    decimate_options.progress = options.progress;
+    // The next level starts from this one; its vertices' quadrics are what make its costs distances to the
+    // original surface rather than to this level's.
+    decimate_options.output_quadrics = i + 1 < levels.size();
+    const std::uint64_t faces_in = input.mesh.face_count();
+    DecimateResult decimated = decimate(std::move(input), decimate_options);
+
+    LodLevel level;
+    level.target_faces = levels[i];
+    level.faces = decimated.mesh.face_count();
+    level.decimate = decimated.stats;
+    max_error = std::max(max_error, decimated.stats.max_error);
+    level.max_error = max_error;
+    if (options.on_level) {
+      options.on_level(i, decimated.mesh);
+    } else {
+      level.mesh = decimated.mesh;
+    }
+    input.mesh = std::move(decimated.mesh);
+    input.quadrics = std::move(decimated.quadrics);
+    level.seconds = seconds_since(start);
+    result.phases.push_back(
+        {"level " + std::to_string(levels[i]), level.seconds, faces_in, level.faces, peak_rss_bytes()});
+    result.levels.push_back(std::move(level));
+  }
+  return result;
+}
+
+std::string lod_level_path(const std::string& pattern, std::uint64_t faces, bool several) {
+  const std::string key = "{faces}";
+  std::string path = pattern;
+  std::size_t at = path.find(key);
+  if (at == std::string::npos) {
+    if (several) throw Error(pattern, {}, "the output pattern needs {faces} to name several levels");
+    return path;
+  }
+  while (at != std::string::npos) {
+    path.replace(at, key.size(), std::to_string(faces));
+    at = path.find(key, at);
+  }
+  return path;
 }
 
 }  // namespace ocsimp

@@ -3,6 +3,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -25,10 +27,20 @@ FileFormat format_from_extension(const std::string& path);
 struct ReadOptions {
   std::size_t batch_capacity = TriangleBatch::default_capacity;
   ProgressFn progress;  // bytes of input read ("read" phase)
+  // Bound in bytes on the vertex array (12 bytes a vertex) an indexed reader (PLY, OBJ) may hold; 0: none.
+  // Past it, open_triangle_stream dereferences the faces out of core (external_dereference.h): the stream
+  // then delivers triangle soups (corner positions; vertex attributes are dropped) in the file's face order.
+  std::uint64_t memory_budget = 0;
+  // For the out-of-core path: when set, an indexed reader hands its positions to this sink in file order, a
+  // chunk at a time, and keeps no vertex array nor attributes; next() still yields indices into the file's
+  // vertices and checks them against the file's vertex count. Other readers ignore it.
+  std::function<void(const Vec3f* positions, std::size_t count)> vertex_sink;
 };
 
 std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
                                                      const ReadOptions& options = {});
+// Whether `stream` dereferences its faces on disk (opened past ReadOptions::memory_budget).
+bool dereferenced_out_of_core(const TriangleStream& stream);
 
 // The whole mesh in memory, built by draining the stream. Corners of a triangle soup (STL) that share a
 // position exactly are welded into one vertex.

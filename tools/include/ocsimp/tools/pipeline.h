@@ -8,9 +8,13 @@
 //   options.target_faces = 1'000'000;
 //   ocsimp::SimplifyResult result = ocsimp::simplify("scan.ply", options);
 //   ocsimp::write_mesh("scan-1m.ply", result.mesh);
+//
+// lod() runs the same first stage once and then decimates a chain of levels, each from the previous one with
+// its quadrics carried, so every level's error is a distance to the original surface.
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -23,14 +27,16 @@
 namespace ocsimp {
 
 struct SimplifyOptions {
-  // Stopping criteria, as DecimateOptions has them: an exact face count, a ratio of the input's faces, an error
-  // bound as a distance in model units. At least one; with several, whichever comes first.
+  // Stopping criteria, as DecimateOptions has them: an exact face count, a ratio of the input's faces, an
+  // error bound as a distance in model units. At least one; with several, whichever comes first.
   std::uint64_t target_faces = 0;
   double target_ratio = 0;
   double max_error = std::numeric_limits<double>::infinity();
 
   // Bound on peak memory, in bytes. 0: a third of physical memory. It decides whether the input is decimated
-  // in core or clustered first, and how large the intermediate mesh may be.
+  // in core or clustered first, how large the intermediate mesh may be, and whether the input's vertex array
+  // may be held at all: it gets what clustering to twice the target leaves (at least half the budget), and
+  // past that the faces are dereferenced on disk under TMPDIR (io.h, ReadOptions::memory_budget).
   std::uint64_t memory_limit = 0;
   // Cluster first even when the input would fit in core (to study the stages on any mesh).
   bool two_stage = false;
@@ -45,9 +51,12 @@ struct SimplifyOptions {
   ProgressFn progress;
 };
 
+// The memory budget in force for `memory_limit` (0: a third of physical memory).
+std::uint64_t effective_memory_limit(std::uint64_t memory_limit);
+
 // One phase of a run, for the summary table and the JSON report.
 struct PhaseReport {
-  std::string name;  // "read", "cluster", "decimate"
+  std::string name;  // "open", "read", "cluster", "decimate", "level N" (lod), "write" (added by the CLI)
   double seconds = 0;
   std::uint64_t triangles_in = 0;
   std::uint64_t triangles_out = 0;
@@ -56,16 +65,64 @@ struct PhaseReport {
 
 struct SimplifyResult {
   IndexedMesh mesh;
-  bool clustered = false;         // whether the clustering stage ran
+  bool clustered = false;  // whether the clustering stage ran
   std::uint64_t input_faces = 0;
   std::uint64_t intermediate_faces = 0;  // 0 when not clustered
   std::vector<PhaseReport> phases;
   ClusterStats cluster;
   DecimateStats decimate;
   std::uint64_t memory_limit = 0;  // the budget in force
+  bool out_of_core = false;        // the input's vertices were dereferenced on disk (io.h, memory_budget)
 };
 
 // Runs the pipeline on a file (any format ocsimp reads). Throws Error on bad input or impossible options.
 SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& options);
+
+struct LodOptions {
+  // Face counts of the levels, in any order (they run largest first); each must be at least 1 and distinct.
+  std::vector<std::uint64_t> level_faces;
+
+  // As in SimplifyOptions; they decide how the input becomes the first level's decimator input.
+  std::uint64_t memory_limit = 0;
+  bool two_stage = false;
+  double intermediate = 0;
+  ClusterOptions cluster;
+  DecimateOptions decimate;  // targets and output_quadrics are set per level
+  int threads = 0;
+  ProgressFn progress;
+
+  // Called with each level as soon as it exists, largest first (e.g. to write it). When set, the meshes are
+  // not kept in LodResult, so memory holds at most two levels at a time.
+  std::function<void(std::size_t level, const IndexedMesh& mesh)> on_level;
+};
+
+struct LodLevel {
+  std::uint64_t target_faces = 0;
+  IndexedMesh mesh;  // empty when LodOptions::on_level is set
+  std::uint64_t faces = 0;
+  double seconds = 0;  // decimating this level (and on_level)
+  // Largest collapse cost so far down the chain, as a distance to the original surface in model units
+  // (DecimateStats::max_error, carried quadrics, maximum over this and every larger level).
+  double max_error = 0;
+  DecimateStats decimate;  // this level's own run
+};
+
+struct LodResult {
+  std::vector<LodLevel> levels;  // largest first
+  bool clustered = false;
+  std::uint64_t input_faces = 0;
+  std::uint64_t intermediate_faces = 0;
+  std::vector<PhaseReport> phases;
+  ClusterStats cluster;
+  std::uint64_t memory_limit = 0;
+  bool out_of_core = false;
+};
+
+// One read of the input (in core or clustered, as simplify() decides for the largest level), then each level
+// decimated from the previous one with its quadrics carried. Throws Error on bad input or options.
+LodResult lod(const std::string& input_path, const LodOptions& options);
+
+// `pattern` with "{faces}" replaced by `faces`. Throws Error when it has no "{faces}" and `several` is true.
+std::string lod_level_path(const std::string& pattern, std::uint64_t faces, bool several);
 
 }  // namespace ocsimp

@@ -1,0 +1,378 @@
+#include "ocsimp/streaming/external_dereference.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <optional>
+#include <vector>
+
+#include "byte_reader.h"
+#include "formats.h"
+#include "ocsimp/core/error.h"
+#include "ply_header.h"
+
+namespace ocsimp {
+namespace {
+
+static_assert(sizeof(Vec3f) == 12 && sizeof(Triangle) == 12);
+
+constexpr std::uint64_t kVertexBytes = 12;
+// Enough partitions for a budget 4096 times smaller than the vertex array; a smaller budget is exceeded
+// rather than letting the per-partition read buffers of next() outgrow it.
+constexpr std::uint64_t kMaxPartitions = 4096;
+constexpr std::size_t kBufferRecords = (1 << 20) / 12;
+constexpr std::size_t kMinBufferRecords = 4096 / 12;
+
+std::string temp_dir() {
+  const char* dir = std::getenv("TMPDIR");
+  return dir != nullptr && *dir != 0 ? dir : "/tmp";
+}
+
+// A temporary file without a name: created under TMPDIR and unlinked at once, so it is gone with its
+// descriptor however the process ends (an exception, a signal, SIGKILL).
+class TempFile {
+ public:
+  TempFile() {
+    std::string name = temp_dir() + "/ocsimp-deref-XXXXXX";
+    fd_ = ::mkstemp(name.data());
+    if (fd_ < 0) fail("creating", errno);
+    ::unlink(name.c_str());
+  }
+  ~TempFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  TempFile(const TempFile&) = delete;
+  TempFile& operator=(const TempFile&) = delete;
+
+  void write_at(std::uint64_t offset, const void* data, std::size_t size) const {
+    const char* p = static_cast<const char*>(data);
+    while (size > 0) {
+      const ssize_t n = ::pwrite(fd_, p, size, static_cast<off_t>(offset));
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        fail("writing", errno);
+      }
+      p += n;
+      size -= static_cast<std::size_t>(n);
+      offset += static_cast<std::uint64_t>(n);
+    }
+  }
+  void read_at(std::uint64_t offset, void* data, std::size_t size) const {
+    char* p = static_cast<char*>(data);
+    while (size > 0) {
+      const ssize_t n = ::pread(fd_, p, size, static_cast<off_t>(offset));
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        fail("reading", errno);
+      }
+      if (n == 0) fail("reading past the end of", 0);
+      p += n;
+      size -= static_cast<std::size_t>(n);
+      offset += static_cast<std::uint64_t>(n);
+    }
+  }
+
+ private:
+  [[noreturn]] static void fail(const char* what, int error) {
+    std::string reason = std::string("out-of-core reading: ") + what + " a temporary file failed";
+    if (error != 0) reason += std::string(": ") + std::strerror(error);
+    throw Error(temp_dir(), {}, reason);
+  }
+
+  int fd_ = -1;
+};
+
+// Appends fixed-size records from `offset` on through a buffer.
+template <class T>
+class RecordWriter {
+ public:
+  RecordWriter(const TempFile& file, std::uint64_t offset, std::size_t buffer_records)
+      : file_(&file), offset_(offset), capacity_(std::max<std::size_t>(buffer_records, 1)) {
+    buffer_.reserve(capacity_);
+  }
+  void push(const T& record) {
+    buffer_.push_back(record);
+    if (buffer_.size() == capacity_) flush();
+  }
+  void flush() {
+    if (buffer_.empty()) return;
+    file_->write_at(offset_, buffer_.data(), buffer_.size() * sizeof(T));
+    offset_ += buffer_.size() * sizeof(T);
+    buffer_.clear();
+  }
+
+ private:
+  const TempFile* file_;
+  std::uint64_t offset_;
+  std::size_t capacity_;
+  std::vector<T> buffer_;
+};
+
+// Reads `count` fixed-size records from `offset` on through a buffer.
+template <class T>
+class RecordReader {
+ public:
+  RecordReader(const TempFile& file, std::uint64_t offset, std::uint64_t count, std::size_t buffer_records)
+      : file_(&file), offset_(offset), left_(count), capacity_(std::max<std::size_t>(buffer_records, 1)) {}
+  const T& next() {
+    if (cursor_ == buffer_.size()) refill();
+    return buffer_[cursor_++];
+  }
+
+ private:
+  void refill() {
+    if (left_ == 0)
+      throw Error(temp_dir(), {}, "out-of-core reading: a temporary file holds fewer records than written");
+    const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(left_, capacity_));
+    buffer_.resize(n);
+    file_->read_at(offset_, buffer_.data(), n * sizeof(T));
+    offset_ += n * sizeof(T);
+    left_ -= n;
+    cursor_ = 0;
+  }
+
+  const TempFile* file_;
+  std::uint64_t offset_;
+  std::uint64_t left_;
+  std::size_t capacity_;
+  std::vector<T> buffer_;
+  std::size_t cursor_ = 0;
+};
+
+// Where the reader's vertices go: memory while they fit the budget, a temporary file once they do not.
+class VertexSpool {
+ public:
+  explicit VertexSpool(std::uint64_t budget_bytes)
+      : capacity_(std::max<std::uint64_t>(budget_bytes / kVertexBytes, 1)) {}
+
+  void add(const Vec3f* positions, std::size_t count) {
+    count_ += count;
+    if (!file_ && memory_.size() + count <= capacity_) {
+      memory_.insert(memory_.end(), positions, positions + count);
+      return;
+    }
+    if (!file_) {
+      file_.emplace();
+      file_->write_at(0, memory_.data(), memory_.size() * sizeof(Vec3f));
+      writer_.emplace(*file_, memory_.size() * sizeof(Vec3f), kBufferRecords);
+      memory_ = {};
+    }
+    for (std::size_t i = 0; i < count; ++i) writer_->push(positions[i]);
+  }
+
+  bool spilled() const { return file_.has_value(); }
+  std::uint64_t count() const { return count_; }
+  std::vector<Vec3f> take_memory() { return std::move(memory_); }
+  // The file with every vertex, once the reader is done.
+  const TempFile& file() {
+    writer_->flush();
+    return *file_;
+  }
+
+ private:
+  std::uint64_t capacity_;
+  std::uint64_t count_ = 0;
+  std::vector<Vec3f> memory_;
+  std::optional<TempFile> file_;
+  std::optional<RecordWriter<Vec3f>> writer_;
+};
+
+class DereferencedStream final : public TriangleStream {
+ public:
+  DereferencedStream(const std::string& path, FileFormat format, const ReadOptions& options)
+      : path_(path),
+        capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
+        budget_(std::max<std::uint64_t>(options.memory_budget, kVertexBytes)),
+        progress_(options.progress),
+        spool_(budget_) {
+    ReadOptions inner_options = options;
+    inner_options.memory_budget = 0;
+    inner_options.vertex_sink = [this](const Vec3f* positions, std::size_t count) {
+      spool_.add(positions, count);
+    };
+    inner_ = format == FileFormat::ply ? detail::open_ply_stream(path, inner_options)
+                                       : detail::open_obj_stream(path, inner_options);
+    bounds_ = inner_->bounds();
+    vertex_count_ = spool_.count();
+    bytes_total_ = inner_->bytes_total();
+    if (!spool_.spilled()) {
+      // They fit after all (OBJ says no count up front): an indexed stream of positions.
+      vertices_.positions = spool_.take_memory();
+      return;
+    }
+    faces_file_.emplace();
+    corners_file_.emplace();
+    drain_faces();
+    inner_.reset();
+    resolve_partitions();
+  }
+
+  bool next(TriangleBatch& batch) override {
+    if (inner_) return inner_->next(batch);
+    batch.clear();
+    if (emitted_ == triangles_) return false;
+    if (!face_reader_) {
+      face_reader_.emplace(*faces_file_, 0, triangles_, kBufferRecords);
+      // Every partition's region is read at once: their buffers share the budget.
+      const std::size_t buffer = static_cast<std::size_t>(std::clamp<std::uint64_t>(
+          budget_ / kVertexBytes / (partitions_ + 1), kMinBufferRecords, kBufferRecords));
+      corner_readers_.reserve(partitions_);
+      for (std::size_t p = 0; p < partitions_; ++p)
+        corner_readers_.emplace_back(*corners_file_, region_offset_[p], corner_counts_[p], buffer);
+    }
+    while (batch.corners.size() < capacity_ && emitted_ < triangles_) {
+      const Triangle t = face_reader_->next();
+      batch.corners.push_back({corner_readers_[t[0] / part_size_].next(),
+                               corner_readers_[t[1] / part_size_].next(),
+                               corner_readers_[t[2] / part_size_].next()});
+      ++emitted_;
+    }
+    return true;
+  }
+
+  const IndexedMesh& vertices() const override { return vertices_; }
+  Box3 bounds() override { return bounds_; }
+  std::uint64_t triangles_hint() const override { return inner_ ? inner_->triangles_hint() : triangles_; }
+  std::uint64_t bytes_read() const override {
+    if (inner_) return inner_->bytes_read();
+    return triangles_ == 0
+               ? bytes_total_
+               : static_cast<std::uint64_t>(static_cast<double>(bytes_total_) *
+                                            static_cast<double>(emitted_) / static_cast<double>(triangles_));
+  }
+  std::uint64_t bytes_total() const override { return bytes_total_; }
+  const std::string& path() const override { return path_; }
+
+  bool out_of_core() const { return !inner_; }
+
+ private:
+  // The faces, once, to the index file; counts the corners of each partition.
+  void drain_faces() {
+    part_size_ = std::max<std::uint64_t>(
+        {budget_ / kVertexBytes, (vertex_count_ + kMaxPartitions - 1) / kMaxPartitions, std::uint64_t{1}});
+    partitions_ = static_cast<std::size_t>((vertex_count_ + part_size_ - 1) / part_size_);
+    corner_counts_.assign(partitions_, 0);
+    RecordWriter<Triangle> writer(*faces_file_, 0, kBufferRecords);
+    TriangleBatch batch;
+    while (inner_->next(batch)) {
+      for (const Triangle& t : batch.triangles) {
+        for (Index v : t) {
+          // The readers check indices against the file's count; this guards the partition arithmetic.
+          if (v >= vertex_count_) {
+            throw Error(path_, {},
+                        "vertex index " + std::to_string(v) + " is out of range (" +
+                            std::to_string(vertex_count_) + " vertices)");
+          }
+          ++corner_counts_[v / part_size_];
+        }
+        writer.push(t);
+      }
+      triangles_ += batch.triangles.size();
+    }
+    writer.flush();
+  }
+
+  // Each partition's vertices in memory, one scan of the index file, its corners' positions to its region.
+  void resolve_partitions() {
+    region_offset_.assign(partitions_, 0);
+    for (std::size_t p = 1; p < partitions_; ++p)
+      region_offset_[p] = region_offset_[p - 1] + corner_counts_[p - 1] * sizeof(Vec3f);
+    const TempFile& vertex_file = spool_.file();
+    std::vector<Vec3f> part;
+    for (std::size_t p = 0; p < partitions_; ++p) {
+      const std::uint64_t first = p * part_size_;
+      const std::uint64_t size = std::min(part_size_, vertex_count_ - first);
+      part.resize(static_cast<std::size_t>(size));
+      vertex_file.read_at(first * sizeof(Vec3f), part.data(), part.size() * sizeof(Vec3f));
+      RecordReader<Triangle> faces(*faces_file_, 0, triangles_, kBufferRecords);
+      RecordWriter<Vec3f> corners(*corners_file_, region_offset_[p], kBufferRecords);
+      for (std::uint64_t f = 0; f < triangles_; ++f) {
+        for (Index v : faces.next()) {
+          const std::uint64_t local = v - first;  // wraps past the end for ids below `first`
+          if (local < size) corners.push(part[static_cast<std::size_t>(local)]);
+        }
+      }
+      corners.flush();
+      report(progress_, "dereference", p + 1, partitions_);
+    }
+  }
+
+  std::string path_;
+  std::size_t capacity_;
+  std::uint64_t budget_;
+  ProgressFn progress_;
+  VertexSpool spool_;
+  std::unique_ptr<TriangleStream> inner_;  // while the vertices fit: the reader itself
+  IndexedMesh vertices_;
+  Box3 bounds_;
+  std::uint64_t vertex_count_ = 0;
+  std::uint64_t bytes_total_ = 0;
+
+  std::optional<TempFile> faces_file_;    // the faces' vertex ids, 12 bytes a triangle
+  std::optional<TempFile> corners_file_;  // corner positions, grouped by the partition of their vertex
+  std::uint64_t triangles_ = 0;
+  std::uint64_t part_size_ = 1;
+  std::size_t partitions_ = 0;
+  std::vector<std::uint64_t> corner_counts_;
+  std::vector<std::uint64_t> region_offset_;
+
+  std::optional<RecordReader<Triangle>> face_reader_;
+  std::vector<RecordReader<Vec3f>> corner_readers_;
+  std::uint64_t emitted_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<TriangleStream> open_dereferenced_stream(const std::string& path,
+                                                         const ReadOptions& options) {
+  const FileFormat format = detect_format(path);
+  if (format != FileFormat::ply && format != FileFormat::obj) {
+    ReadOptions plain = options;
+    plain.memory_budget = 0;
+    return open_triangle_stream(path, plain);
+  }
+  return std::make_unique<DereferencedStream>(path, format, options);
+}
+
+bool dereferenced_out_of_core(const TriangleStream& stream) {
+  const auto* dereferenced = dynamic_cast<const DereferencedStream*>(&stream);
+  return dereferenced != nullptr && dereferenced->out_of_core();
+}
+
+namespace detail {
+
+std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, FileFormat format,
+                                                   const ReadOptions& options) {
+  if (format == FileFormat::ply) {
+    // The header says how many vertices there are; a header that does not parse is left to the reader to
+    // report.
+    std::uint64_t vertices = 0;
+    try {
+      ByteReader reader(path, 1 << 16);
+      const PlyHeader header = parse_ply_header(reader);
+      for (const PlyElement& element : header.elements) {
+        if (element.name == "vertex") vertices = element.count;
+      }
+    } catch (const Error&) {
+      return nullptr;
+    }
+    if (vertices * kVertexBytes <= options.memory_budget) return nullptr;
+    return std::make_unique<DereferencedStream>(path, format, options);
+  }
+  if (format == FileFormat::obj) {
+    // No count up front: a vertex line takes at least 8 bytes ("v 0 0 0\n"), so a file that small cannot
+    // exceed the budget; otherwise the spool decides once it has seen the vertices.
+    ByteReader reader(path, 1 << 12);
+    if (reader.file_size() / 8 * kVertexBytes <= options.memory_budget) return nullptr;
+    return std::make_unique<DereferencedStream>(path, format, options);
+  }
+  return nullptr;
+}
+
+}  // namespace detail
+}  // namespace ocsimp

@@ -1,0 +1,207 @@
+// Out-of-core dereferencing (external_dereference.h): with a vertex budget far below the mesh, every format
+// it covers must deliver exactly the corners the in-memory reader resolves, in the same order, leave no file
+// behind, and report bad input as the plain reader does.
+#include "ocsimp/streaming/external_dereference.h"
+
+#include <gtest/gtest.h>
+#include <stdlib.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+#include "test_support.h"
+
+namespace ocsimp {
+namespace {
+
+// Points TMPDIR at a test folder for the scope, so the test can see what the dereferencing leaves there.
+struct ScopedTmpdir {
+  std::string old;
+  bool had = false;
+  explicit ScopedTmpdir(const std::string& dir) {
+    if (const char* value = std::getenv("TMPDIR")) {
+      old = value;
+      had = true;
+    }
+    ::setenv("TMPDIR", dir.c_str(), 1);
+  }
+  ~ScopedTmpdir() {
+    if (had) {
+      ::setenv("TMPDIR", old.c_str(), 1);
+    } else {
+      ::unsetenv("TMPDIR");
+    }
+  }
+};
+
+std::size_t entries(const std::string& dir) {
+  std::size_t n = 0;
+  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir)) ++n;
+  return n;
+}
+
+// A bumpy grid with every vertex at a distinct position, its vertex ids shuffled so that the faces reference
+// them out of order (as scans do), which spreads each batch over every partition.
+IndexedMesh shuffled_grid(int n) {
+  IndexedMesh grid = test::grid_square(n);
+  const std::size_t count = grid.positions.size();
+  std::vector<Index> slot(count);
+  for (std::size_t i = 0; i < count; ++i) slot[i] = static_cast<Index>((i * 7919) % count);
+  IndexedMesh mesh;
+  mesh.positions.resize(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    Vec3f p = grid.positions[i];
+    p.z() = 0.01f * static_cast<float>((i * 31) % 17);
+    mesh.positions[slot[i]] = p;
+  }
+  for (const Triangle& t : grid.triangles) mesh.triangles.push_back({slot[t[0]], slot[t[1]], slot[t[2]]});
+  return mesh;
+}
+
+std::vector<std::array<Vec3f, 3>> drain_corners(TriangleStream& stream) {
+  std::vector<std::array<Vec3f, 3>> corners;
+  TriangleBatch batch;
+  while (stream.next(batch)) {
+    EXPECT_TRUE(batch.triangles.empty());
+    corners.insert(corners.end(), batch.corners.begin(), batch.corners.end());
+  }
+  return corners;
+}
+
+void expect_same_corners(const std::string& path, std::uint64_t budget) {
+  SCOPED_TRACE(path);
+  const IndexedMesh mesh = read_mesh(path);
+  ReadOptions options;
+  options.memory_budget = budget;
+  options.batch_capacity = 1000;  // many batches
+  std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+  ASSERT_TRUE(dereferenced_out_of_core(*stream));
+  EXPECT_FALSE(stream->indexed());
+  EXPECT_EQ(stream->triangles_hint(), mesh.face_count());
+  const Box3 bounds = stream->bounds();
+  EXPECT_EQ(bounds.lo, mesh.bounds().lo);
+  EXPECT_EQ(bounds.hi, mesh.bounds().hi);
+  const auto corners = drain_corners(*stream);
+  ASSERT_EQ(corners.size(), mesh.face_count());
+  for (std::size_t f = 0; f < corners.size(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_EQ(corners[f][k], mesh.positions[mesh.triangles[f][k]]) << "face " << f << " corner " << k;
+    }
+  }
+}
+
+TEST(ExternalDereference, BinaryAndAsciiPlyGiveTheInMemoryCorners) {
+  test::TempDir dir;
+  const std::string work = dir / "tmp";
+  std::filesystem::create_directories(work);
+  ScopedTmpdir tmpdir(work);
+  const IndexedMesh mesh = shuffled_grid(60);  // 3,721 vertices, 7,200 triangles
+  const std::string binary = dir / "binary.ply", ascii = dir / "ascii.ply";
+  write_mesh(binary, mesh);
+  WriteOptions text;
+  text.ascii = true;
+  write_mesh(ascii, mesh, text);
+  // 100 vertices a partition: 38 partitions.
+  expect_same_corners(binary, 1200);
+  expect_same_corners(ascii, 1200);
+  // A budget below 12 bytes still holds one vertex.
+  expect_same_corners(binary, 1);
+  EXPECT_EQ(entries(work), 0u);
+}
+
+TEST(ExternalDereference, ObjWithPolygonsAttributesAndRelativeIndices) {
+  test::TempDir dir;
+  const std::string work = dir / "tmp";
+  std::filesystem::create_directories(work);
+  ScopedTmpdir tmpdir(work);
+  const std::string path = dir / "mixed.obj";
+  std::ofstream(path) << "# quads, a pentagon, uvs, normals, negative indices, vertices after faces\n"
+                         "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
+                         "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
+                         "v 2 0 0.5\nv 2 1 0.5\nv 3 0.5 1\n"
+                         "f -3 -2 -1 3 2\n"
+                         "f 2//1 5//1 6//1\n"
+                         "v 4 4 4\nf 8 7 6\n";
+  expect_same_corners(path, 24);  // two vertices a partition
+  EXPECT_EQ(entries(work), 0u);
+}
+
+TEST(ExternalDereference, FacesBeforeVerticesInPly) {
+  test::TempDir dir;
+  const std::string path = dir / "faces-first.ply";
+  std::ofstream(path)
+      << "ply\nformat ascii 1.0\nelement face 2\nproperty list uchar int vertex_indices\n"
+         "element vertex 4\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+         "3 3 1 0\n4 0 1 2 3\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n";
+  expect_same_corners(path, 12);
+}
+
+TEST(ExternalDereference, StaysIndexedWhenTheVerticesFit) {
+  test::TempDir dir;
+  const std::string path = dir / "small.obj";
+  write_mesh(path, shuffled_grid(10));
+  ReadOptions options;
+  options.memory_budget = 1 << 20;
+  std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+  EXPECT_FALSE(dereferenced_out_of_core(*stream));
+  ASSERT_TRUE(stream->indexed());
+  const IndexedMesh direct = read_mesh(path);
+  const IndexedMesh through = read_mesh(*stream);
+  EXPECT_EQ(through.positions, direct.positions);
+  EXPECT_EQ(through.triangles, direct.triangles);
+}
+
+TEST(ExternalDereference, OpenTriangleStreamChoosesByTheBudget) {
+  test::TempDir dir;
+  const std::string path = dir / "grid.ply";
+  write_mesh(path, shuffled_grid(20));  // 441 vertices: 5,292 bytes of positions
+  ReadOptions options;
+  options.memory_budget = 5292;
+  EXPECT_FALSE(dereferenced_out_of_core(*open_triangle_stream(path, options)));
+  EXPECT_TRUE(open_triangle_stream(path, options)->indexed());
+  options.memory_budget = 5291;
+  EXPECT_TRUE(dereferenced_out_of_core(*open_triangle_stream(path, options)));
+  options.memory_budget = 0;
+  EXPECT_FALSE(dereferenced_out_of_core(*open_triangle_stream(path, options)));
+}
+
+TEST(ExternalDereference, BadInputGivesTheReadersErrorAndLeavesNothing) {
+  test::TempDir dir;
+  const std::string work = dir / "tmp";
+  std::filesystem::create_directories(work);
+  ScopedTmpdir tmpdir(work);
+  const std::string bad = dir / "bad.ply";
+  std::ofstream(bad)
+      << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+         "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+         "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 7\n";
+  ReadOptions options;
+  options.memory_budget = 12;
+  try {
+    open_dereferenced_stream(bad, options);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("bad.ply"), std::string::npos) << what;
+    EXPECT_NE(what.find("line 14"), std::string::npos) << what;
+    EXPECT_NE(what.find("out of range"), std::string::npos) << what;
+  }
+  const std::string truncated = dir / "truncated.obj";
+  std::ofstream(truncated) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n";
+  try {
+    open_dereferenced_stream(truncated, options);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("truncated.obj"), std::string::npos) << what;
+    EXPECT_NE(what.find("line 4"), std::string::npos) << what;
+  }
+  EXPECT_EQ(entries(work), 0u);
+}
+
+}  // namespace
+}  // namespace ocsimp

@@ -1,0 +1,168 @@
+// ocsimp lod: a chain of levels of detail from one read of the input, each decimated from the previous one
+// with its quadrics carried, so every level's error is a distance to the original surface.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <sstream>
+
+#include "commands.h"
+#include "ocsimp/core/error.h"
+#include "ocsimp/streaming/io.h"
+#include "ocsimp/tools/pipeline.h"
+
+namespace ocsimp::cli {
+namespace {
+
+constexpr const char* kReportFields = R"(Report (--report FILE.json), one object:
+  command             "lod"
+  input, output       the input path and the output pattern
+  input_faces         triangles read (polygons fan-triangulated)
+  clustered, out_of_core, intermediate_faces, memory_limit_bytes, peak_rss_bytes, seconds   as in simplify
+  max_error           the last (smallest) level's max_error
+  levels              largest first: [{target_faces, faces, vertices, file, seconds, max_error, level_max_error,
+                      target_reached, stop}]; max_error is the largest collapse cost down the chain up to this
+                      level, as a distance to the original surface (carried quadrics); level_max_error is this
+                      level's own run's largest cost
+  phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}]: open, read or cluster,
+                      then "level N" per level (decimating it and writing its file))";
+
+std::vector<std::uint64_t> parse_levels(const std::string& text) {
+  std::vector<std::uint64_t> levels;
+  std::stringstream stream(text);
+  std::string item;
+  while (std::getline(stream, item, ',')) {
+    std::size_t used = 0;
+    unsigned long long value = 0;
+    try {
+      value = std::stoull(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size() || value == 0 || item[0] == '-') {
+      throw Error("--faces: '" + item + "' is not a face count (give positive integers separated by commas)");
+    }
+    levels.push_back(value);
+  }
+  if (levels.empty()) throw Error("--faces: no level given");
+  return levels;
+}
+
+}  // namespace
+
+void add_lod_command(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "lod",
+      "Levels of detail from one read of the input: each level decimated from the previous one with its "
+      "quadrics carried, so every level's error is measured against the original; each file written "
+      "atomically");
+  cmd->footer(kReportFields);
+  struct Flags {
+    std::string input, output, report, memory_limit, faces;
+    LodOptions options;
+    bool ascii = false;
+    bool quiet = false;
+  };
+  auto flags = std::make_shared<Flags>();
+  LodOptions& o = flags->options;
+  cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
+  cmd->add_option("-o,--output", flags->output,
+                  "Output pattern; {faces} becomes each level's target, e.g. 'out_{faces}.ply'")
+      ->required();
+  cmd->add_option("--faces", flags->faces,
+                  "Face counts of the levels, comma-separated, e.g. 1000000,100000,10000")
+      ->required();
+  cmd->add_option("--memory-limit", flags->memory_limit,
+                  "Peak memory budget, e.g. 2G (default: a third of RAM)");
+  cmd->add_flag("--two-stage", o.two_stage, "Cluster first even when the input fits in core");
+  cmd->add_option("--intermediate", o.intermediate,
+                  "Intermediate faces as a multiple of the largest level (default: from the memory budget)");
+  cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
+      ->capture_default_str();
+  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)");
+  cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
+  cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors (no progress bars, no summary)");
+  cmd->callback([flags] {
+    LodOptions options = flags->options;
+    options.level_faces = parse_levels(flags->faces);
+    const bool several = options.level_faces.size() > 1;
+    // Refuse a bad pattern or format before reading anything.
+    for (std::uint64_t faces : options.level_faces) {
+      format_from_extension(lod_level_path(flags->output, faces, several));
+    }
+    if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
+    const ProgressFn progress = make_progress(flags->quiet);
+    options.progress = progress;
+    std::vector<std::string> files;
+    std::vector<std::size_t> vertices;
+    WriteOptions write;
+    write.ascii = flags->ascii;
+    write.progress = progress;
+    std::vector<std::uint64_t> sorted = options.level_faces;
+    std::sort(sorted.begin(), sorted.end(), std::greater<>());
+    options.on_level = [&](std::size_t level, const IndexedMesh& mesh) {
+      files.push_back(lod_level_path(flags->output, sorted[level], several));
+      vertices.push_back(mesh.vertex_count());
+      write_mesh(files.back(), mesh, write);
+    };
+    const auto start = std::chrono::steady_clock::now();
+    const LodResult result = lod(flags->input, options);
+    const double total = seconds_since(start);
+
+    if (!flags->report.empty()) {
+      nlohmann::json report;
+      report["command"] = "lod";
+      report["input"] = flags->input;
+      report["output"] = flags->output;
+      report["input_faces"] = result.input_faces;
+      report["clustered"] = result.clustered;
+      report["out_of_core"] = result.out_of_core;
+      report["intermediate_faces"] = result.intermediate_faces;
+      report["memory_limit_bytes"] = result.memory_limit;
+      report["peak_rss_bytes"] = peak_rss_bytes();
+      report["seconds"] = total;
+      report["max_error"] = result.levels.empty() ? 0.0 : result.levels.back().max_error;
+      report["levels"] = nlohmann::json::array();
+      for (std::size_t i = 0; i < result.levels.size(); ++i) {
+        const LodLevel& level = result.levels[i];
+        report["levels"].push_back({{"target_faces", level.target_faces},
+                                    {"faces", level.faces},
+                                    {"vertices", vertices[i]},
+                                    {"file", files[i]},
+                                    {"seconds", level.seconds},
+                                    {"max_error", level.max_error},
+                                    {"level_max_error", level.decimate.max_error},
+                                    {"target_reached", level.decimate.target_reached},
+                                    {"stop", stop_name(level.decimate.stop)}});
+      }
+      report["phases"] = phases_json(result.phases);
+      write_json_report(flags->report, report);
+    }
+    for (const LodLevel& level : result.levels) {
+      if (!level.decimate.target_reached && !level.decimate.reason.empty()) {
+        std::fprintf(stderr, "ocsimp: warning: level %llu: %s\n",
+                     static_cast<unsigned long long>(level.target_faces), level.decimate.reason.c_str());
+      }
+    }
+    if (show_summary(flags->quiet)) {
+      print_phase_table(result.phases);
+      std::printf("\n%-12s %12s %10s %14s  %s\n", "level", "faces", "seconds", "max error", "file");
+      for (std::size_t i = 0; i < result.levels.size(); ++i) {
+        const LodLevel& level = result.levels[i];
+        std::printf("%-12llu %12llu %10.3f %14.6g  %s\n", static_cast<unsigned long long>(level.target_faces),
+                    static_cast<unsigned long long>(level.faces), level.seconds, level.max_error,
+                    files[i].c_str());
+      }
+      std::printf(
+          "total %.3f s from %llu input faces%s%s, peak RSS %s; max error is a distance to the original\n",
+          total, static_cast<unsigned long long>(result.input_faces),
+          result.clustered ? ", clustered first" : "",
+          result.out_of_core ? ", vertices dereferenced on disk" : "",
+          format_bytes(peak_rss_bytes()).c_str());
+    }
+  });
+}
+
+}  // namespace ocsimp::cli
