@@ -8,7 +8,8 @@
 // vertex's incident faces are a circular list of CSR segments (its own, then those of the vertices it
 // absorbed); each gather packs the live ones into as few segments as hold them, so nothing is allocated per
 // collapse and a vertex that absorbed many others still reads one or two lists. The large arrays ask for
-// transparent huge pages.
+// transparent huge pages, and each time half the vertices are gone the survivors are renumbered to the
+// front of them, in order (see compact).
 //
 // The queue is in priority order, so consecutive collapses land anywhere in memory and the loop is bound by
 // memory latency. Two things hide some of it: the next collapse is nearly always the cheapest child of the
@@ -657,9 +658,7 @@ struct Decimator {
     parallel_chunks(ne, 16384, [&](std::size_t begin, std::size_t end) {
       for (std::size_t e = begin; e < end; ++e) {
         float key = 0;
-        Placement p;
-        Quadric q;
-        const std::uint32_t state = evaluate(static_cast<Index>(e), &q, &p, &key);
+        const std::uint32_t state = key_of_edge(static_cast<Index>(e), &key);
         entries[e] = {key, state == 0 ? static_cast<std::uint32_t>(e) : state};
       }
     });
@@ -718,6 +717,19 @@ struct Decimator {
   // The pair's summed quadric, placement, cost (quadric error plus attribute penalty) and key. Returns 0 for
   // a candidate, else the idle state it is in.
   std::uint32_t evaluate(Index e, Quadric* q, Placement* p, float* key, double* cost_out = nullptr) const {
+    return evaluate_inline(e, q, p, key, cost_out);
+  }
+
+  // The key alone, for re-costs and setup (about 7 per collapse): inlined with the quadric and placement in
+  // locals, the compiler keeps them in registers instead of storing them for a caller that never reads them.
+  std::uint32_t key_of_edge(Index e, float* key) const {
+    Quadric q;
+    Placement p;
+    return evaluate_inline(e, &q, &p, key, nullptr);
+  }
+
+  [[gnu::always_inline]] std::uint32_t evaluate_inline(Index e, Quadric* q, Placement* p, float* key,
+                                                       double* cost_out) const {
     const Index a = edges[e].v[0], b = edges[e].v[1];
     const Vertex& va = verts[a];
     const Vertex& vb = verts[b];
@@ -745,10 +757,8 @@ struct Decimator {
   }
 
   void recost(Index e) {
-    Quadric q;
-    Placement p;
     float key = 0;
-    const std::uint32_t state = evaluate(e, &q, &p, &key);
+    const std::uint32_t state = key_of_edge(e, &key);
     if (state == 0) {
       if (in_heap(e)) {
         heap.update(e, key);
@@ -939,7 +949,12 @@ struct Decimator {
       expected = target_v > 0 ? std::min(expected, by_faces) : by_faces;
     }
     std::uint64_t next_report = 0;
+    std::uint64_t compact_below = virtual_pairs.empty() ? stats.input_vertices / 2 : 0;
     while (!reached()) {
+      if (verts_alive <= compact_below) {
+        compact();
+        compact_below = verts_alive / 2;
+      }
       if (stats.collapses >= next_report) {
         report(opt.progress, "decimate", stats.collapses, expected);
         next_report = stats.collapses + 16384;
@@ -967,6 +982,90 @@ struct Decimator {
       try_top(overshoot);
     }
     report(opt.progress, "decimate", stats.collapses, std::max(expected, stats.collapses));
+  }
+
+  // Survivors are scattered over arrays sized for the input: past 10 % of the input, collapses cost about
+  // 1.5 times as much on a 1 M-triangle scan, as each touches cache lines and pages that hold mostly dead
+  // records. Renumbering the live vertices, faces and edges to the front, in index order (so the output
+  // order is unchanged), and rebuilding the face lists as one segment per vertex, packs them together. Done
+  // in place (no memory added) each time half the vertices of the last renumbering remain: about 6 % less
+  // CPU time on 1 M and 10 M-triangle scans decimated to 1 % (against a quarter: about 3 %); the heap keeps
+  // its order, so the output is byte-identical. Not with virtual pairs (their per-vertex lists would need
+  // renumbering too).
+  void compact() {
+    const std::size_t nv = verts.size(), nf = faces.size(), ne = edges.size();
+    // An edge lives only while a face holds both its ends; be safe anyway about ends left without faces.
+    for (std::size_t e = 0; e < ne; ++e) {
+      const Edge& edge = edges[e];
+      if (edge.slot != kDead && (verts[edge.v[0]].live_faces == 0 || verts[edge.v[1]].live_faces == 0))
+        kill(static_cast<Index>(e));
+    }
+    // New vertex ids in `mark` (scratch), new edge ids in `vf` (rebuilt below; it has room, as every edge
+    // was found in a face).
+    if (vf.size() < ne) vf.resize(ne);
+    Index nv_new = 0;
+    for (std::size_t v = 0; v < nv; ++v) verts[v].mark = verts[v].live_faces > 0 ? nv_new++ : kNone;
+    Index ne_new = 0;
+    for (std::size_t e = 0; e < ne; ++e) {
+      const Edge edge = edges[e];
+      if (edge.slot == kDead) {
+        vf[e] = kNone;
+        continue;
+      }
+      vf[e] = ne_new;
+      edges[ne_new] = {{verts[edge.v[0]].mark, verts[edge.v[1]].mark}, edge.slot};
+      if (edge.slot < first_state) heap.rename(edge.slot, ne_new);
+      ++ne_new;
+    }
+    for (std::vector<Index>* list : {&blocked, &deferred}) {
+      std::size_t kept = 0;
+      for (Index e : *list) {
+        if (vf[e] != kNone) (*list)[kept++] = vf[e];
+      }
+      list->resize(kept);
+    }
+    Index nf_new = 0;
+    for (std::size_t f = 0; f < nf; ++f) {
+      const Face& t = faces[f];
+      if (t.v[0] == kNone) continue;
+      faces[nf_new++] = {{verts[t.v[0]].mark, verts[t.v[1]].mark, verts[t.v[2]].mark},
+                         {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
+                         {t.ref[0], t.ref[1]}};
+    }
+    for (std::size_t v = 0; v < nv; ++v) {
+      const Index to = verts[v].mark;
+      if (to == kNone) continue;
+      verts[to] = verts[v];
+      Vertex& x = verts[to];
+      x.stamp = 0;
+      x.seg_count = 0;
+      x.seg_next = to;
+      if (!normals.empty()) normals[to] = normals[v];
+      if (!colors.empty()) colors[to] = colors[v];
+      if (!uvs.empty()) uvs[to] = uvs[v];
+    }
+    stamp_now = 0;
+    verts.resize(nv_new);
+    faces.resize(nf_new);
+    edges.resize(ne_new);
+    if (!normals.empty()) normals.resize(nv_new);
+    if (!colors.empty()) colors.resize(nv_new);
+    if (!uvs.empty()) uvs.resize(nv_new);
+
+    for (const Face& f : faces) {
+      for (Index v : f.v) ++verts[v].seg_count;
+    }
+    Index running = 0;
+    for (Vertex& x : verts) {
+      x.seg_start = running;
+      x.seg_cap = x.seg_count;
+      x.mark = running;  // fill cursor
+      running += x.seg_count;
+    }
+    vf.resize(running);
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+      for (Index v : faces[f].v) vf[verts[v].mark++] = static_cast<Index>(f);
+    }
   }
 
   // The next pair to collapse is nearly always the cheapest child of the heap's root (the current top). Its

@@ -34,6 +34,8 @@ class EdgeHeap {
   const HeapEntry& top() const { return entries_.front(); }
   const HeapEntry& entry(std::size_t i) const { return entries_[i]; }
   void prefetch(std::size_t i) const { __builtin_prefetch(&entries_[i]); }
+  // The edge at heap position i got a new id (its record, slot included, moved there).
+  void rename(std::size_t i, std::uint32_t edge) { entries_[i].edge = edge; }
 
   // Takes `entries` (any order) as the whole heap and orders it in linear time.
   void assign(BigVector<HeapEntry> entries) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -477,6 +478,34 @@ TEST(Decimate, LockedBoundaryDoesNotMove) {
   EXPECT_EQ(stuck.stats.stop, DecimateStop::blocked);
   EXPECT_FALSE(stuck.stats.target_reached);
   EXPECT_NE(stuck.stats.reason.find("locked"), std::string::npos) << stuck.stats.reason;
+}
+
+// The decimator renumbers its survivors as vertices go (every time half of them are left); the output must
+// still list vertices in input order. Locked border vertices keep their exact positions, so they can be
+// traced back to their input index.
+TEST(Decimate, OutputKeepsInputVertexOrder) {
+  const IndexedMesh bumpy =
+      height_field(40, [](double x, double y) { return 0.15 * std::sin(5 * x) * std::sin(4 * y + 0.3); });
+  std::map<std::array<float, 3>, std::size_t> input_index;
+  for (std::size_t i = 0; i < bumpy.positions.size(); ++i) {
+    const Vec3f& p = bumpy.positions[i];
+    if (p.x() == 0 || p.x() == 1 || p.y() == 0 || p.y() == 1) input_index[{p.x(), p.y(), p.z()}] = i;
+  }
+  for (std::uint64_t target : {400u, 200u}) {
+    DecimateOptions o = faces(target);
+    o.lock_boundary = true;
+    const DecimateResult r = run(bumpy, o);
+    EXPECT_EQ(r.mesh.face_count(), target);
+    ASSERT_LT(r.mesh.vertex_count(), bumpy.vertex_count() / 4);  // renumbered at least twice
+    std::vector<std::size_t> order;
+    for (const Vec3f& p : r.mesh.positions) {
+      const auto it = input_index.find({p.x(), p.y(), p.z()});
+      if (it != input_index.end()) order.push_back(it->second);
+    }
+    EXPECT_EQ(order.size(), input_index.size());
+    EXPECT_TRUE(std::is_sorted(order.begin(), order.end()));
+    EXPECT_EQ(analyze_topology(r.mesh).boundary_edges, 4u * 40u);
+  }
 }
 
 TEST(Decimate, BoundaryWeightKeepsTheBorderStraight) {
