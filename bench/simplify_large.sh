@@ -8,7 +8,8 @@
 #
 #   bench/simplify_large.sh [BUILD_DIR]          (default: build)
 #   env: TRIANGLES (default 1000000000), FACES (default 1000000), LIMIT (default 2G; "" to skip that run),
-#        TMPDIR (where the mesh and the out-of-core files go; default /tmp)
+#        TMPDIR (where the mesh and the out-of-core files go; default /tmp),
+#        INPUT (an existing `ocsimp gen` PLY to use instead of generating one; it is kept)
 #
 # Disk: the input takes about 19 bytes a triangle; the LIMIT run adds about 54 bytes a triangle of unlinked
 # temporary files under TMPDIR (12 a vertex + 48 a triangle). The script checks `df` first and skips what
@@ -28,17 +29,21 @@ free_bytes=$(($(df --output=avail -k "$tmp" | tail -1) * 1024))
 input_bytes=$((TRIANGLES * 19 + (1 << 20)))
 deref_bytes=$((TRIANGLES * 54))
 echo "mesh: $TRIANGLES triangles, about $((input_bytes >> 30)) GiB; free under $tmp: $((free_bytes >> 30)) GiB"
-if ((input_bytes > free_bytes)); then
+if [[ -n ${INPUT:-} ]]; then
+  input_bytes=0  # already on disk
+elif ((input_bytes > free_bytes)); then
   echo "not enough disk under $tmp for the input" >&2
   exit 1
 fi
 
 work=$(mktemp -d "$tmp/ocsimp-simplify-large.XXXXXX")
 trap 'rm -rf "$work"' EXIT INT TERM
-mesh="$work/mesh.ply"
+mesh=${INPUT:-$work/mesh.ply}
 
 echo "load average: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores, $(($(grep MemTotal /proc/meminfo | awk '{print $2}') >> 20)) GiB"
-/usr/bin/time -f "gen: %e s wall, %M KB peak" "$ocsimp" gen -q -o "$mesh" --triangles "$TRIANGLES"
+if [[ -z ${INPUT:-} ]]; then
+  /usr/bin/time -f "gen: %e s wall, %M KB peak" "$ocsimp" gen -q -o "$mesh" --triangles "$TRIANGLES"
+fi
 cat "$mesh" >/dev/null  # into page cache
 /usr/bin/time -f "cat: %e s wall (one read of $(($(stat -c %s "$mesh") >> 20)) MiB from page cache)" \
   cat "$mesh" >/dev/null

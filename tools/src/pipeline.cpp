@@ -13,8 +13,9 @@
 namespace ocsimp {
 namespace {
 
-// Peak bytes per face of reading a mesh and decimating it in core (the decimator's working set plus the
-// mesh it was read into), measured with `bench/pipeline_memory.sh`; used only to choose the path.
+// Peak bytes per face of reading a mesh and decimating it in core: the decimator's peak, 135-137 bytes per
+// input triangle on the 10 M scan (bench/decimate_vs_meshopt.sh), plus the 12-byte face and ~6-byte vertex
+// arrays it was read into, rounded up. Used only to choose the path.
 constexpr double kInCoreBytesPerFace = 160.0;
 // Bytes per occupied fine cell while clustering (cluster.h documents about 190).
 constexpr double kClusterBytesPerCell = 200.0;
