@@ -3,14 +3,22 @@
 // Nodes are Morton prefixes of the fine cells. Every cluster sits at one node: a fine cell starts at its
 // parent, and a node whose children have all merged into a single cluster hands that cluster up to its own
 // parent. Two clusters at the same node may merge; the cost of a merge is the increase of quadric error,
-// E(a + b) - E(a) - E(b), with E a cluster's placement quadric at its representative. A priority queue
-// takes the cheapest merge first, one pair at a time, so the cluster count steps down by exactly one.
+// E(a + b) - E(a) - E(b), with E a cluster's placement quadric at its representative. The cheapest merge
+// (then the lowest pair of cluster ids) goes first, one pair at a time, so the cluster count steps down by
+// exactly one.
+//
+// The bookkeeping is laid out for the merge loop's memory traffic. A node's pair costs live in a small
+// triangular table of its child slots, with the merged cluster's error, so a merge recomputes only the
+// survivor's pairs, places nothing twice, and no cost is ever stale; a heap holds one entry per node (its
+// cheapest pair) and is updated in place. The face count of a face target is not tracked merge by merge:
+// it can only fall as clusters merge, so the loop runs in batches sized to reach the target, recounts the
+// (shrinking) list of distinct faces after each batch, and finds the exact stopping merge inside the batch
+// that crossed the target by bisection.
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <functional>
-#include <memory>
-#include <queue>
+#include <array>
+#include <cmath>
 
 #include "place.h"
 #include "regroup.h"
@@ -20,158 +28,215 @@ namespace {
 
 constexpr std::uint32_t kEnd = ~std::uint32_t{0};
 
-// Multiset of triangles of three distinct labels, counting how many fine triangles map onto each.
-class TripleCounter {
- public:
-  explicit TripleCounter(std::size_t expected) {
-    capacity_ = power_of_two_at_least(2 * expected + 16);
-    slots_.assign(capacity_, Slot{kEnd, 0, 0, 0});
-  }
-  std::size_t size() const { return size_; }
-
-  void add(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
-    sort3(a, b, c);
-    std::size_t i = home(a, b, c);
-    while (slots_[i].a != kEnd) {
-      if (slots_[i].a == a && slots_[i].b == b && slots_[i].c == c) {
-        ++slots_[i].count;
-        return;
-      }
-      i = (i + 1) & (capacity_ - 1);
-    }
-    slots_[i] = {a, b, c, 1};
-    if (2 * ++size_ > capacity_) grow();
-  }
-  void remove(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
-    sort3(a, b, c);
-    std::size_t i = home(a, b, c);
-    while (!(slots_[i].a == a && slots_[i].b == b && slots_[i].c == c)) i = (i + 1) & (capacity_ - 1);
-    if (--slots_[i].count > 0) return;
-    // Backward-shift deletion keeps linear probing free of tombstones.
-    std::size_t hole = i;
-    for (std::size_t j = (hole + 1) & (capacity_ - 1); slots_[j].a != kEnd; j = (j + 1) & (capacity_ - 1)) {
-      const std::size_t h = home(slots_[j].a, slots_[j].b, slots_[j].c);
-      const bool movable = hole <= j ? (h <= hole || h > j) : (h <= hole && h > j);
-      if (movable) {
-        slots_[hole] = slots_[j];
-        hole = j;
-      }
-    }
-    slots_[hole].a = kEnd;
-    --size_;
-  }
-
- private:
-  struct Slot {
-    std::uint32_t a, b, c, count;
-  };
-  static void sort3(std::uint32_t& a, std::uint32_t& b, std::uint32_t& c) {
-    if (a > b) std::swap(a, b);
-    if (b > c) std::swap(b, c);
-    if (a > b) std::swap(a, b);
-  }
-  std::size_t home(std::uint32_t a, std::uint32_t b, std::uint32_t c) const {
-    return mix64((static_cast<std::uint64_t>(a) << 32 | b) ^ mix64(c + 0x9E3779B97F4A7C15ull)) &
-           (capacity_ - 1);
-  }
-  void grow() {
-    std::vector<Slot> old = std::move(slots_);
-    capacity_ *= 2;
-    slots_.assign(capacity_, Slot{kEnd, 0, 0, 0});
-    for (const Slot& s : old) {
-      if (s.a == kEnd) continue;
-      std::size_t i = home(s.a, s.b, s.c);
-      while (slots_[i].a != kEnd) i = (i + 1) & (capacity_ - 1);
-      slots_[i] = s;
-    }
-  }
-
-  std::vector<Slot> slots_;
-  std::size_t capacity_ = 0;
-  std::size_t size_ = 0;
-};
-
-// The exact face count of the current clustering, updated merge by merge. Each fine triangle's corners carry
-// labels; merging relabels the corners of the smaller side (each corner is relabeled O(log n) times).
-class FaceTracker {
- public:
-  FaceTracker(const CellTriangles& triangles, std::size_t cells)
-      : label_(3 * triangles.size()),
-        next_(3 * triangles.size(), kEnd),
-        head_(cells, kEnd),
-        tail_(cells, kEnd),
-        size_(cells, 0),
-        faces_(triangles.size()) {
-    for (std::size_t t = 0; t < triangles.size(); ++t) {
-      const std::uint32_t corner[3] = {triangles[t].first(), triangles[t].second(), triangles[t].third()};
-      for (int k = 0; k < 3; ++k) {
-        const std::size_t s = 3 * t + k;
-        label_[s] = corner[k];
-        append(corner[k], static_cast<std::uint32_t>(s));
-      }
-      faces_.add(corner[0], corner[1], corner[2]);
-    }
-  }
-  std::size_t faces() const { return faces_.size(); }
-
-  // Merges the clusters labelled x and y; returns the label the union carries.
-  std::uint32_t merge(std::uint32_t x, std::uint32_t y) {
-    if (size_[x] < size_[y]) std::swap(x, y);
-    for (std::uint32_t s = head_[y]; s != kEnd; s = next_[s]) {
-      const std::size_t base = s - s % 3;
-      if (distinct(base)) faces_.remove(label_[base], label_[base + 1], label_[base + 2]);
-      label_[s] = x;
-      if (distinct(base)) faces_.add(label_[base], label_[base + 1], label_[base + 2]);
-    }
-    if (head_[y] != kEnd) {
-      if (head_[x] == kEnd) {
-        head_[x] = head_[y];
-      } else {
-        next_[tail_[x]] = head_[y];
-      }
-      tail_[x] = tail_[y];
-      size_[x] += size_[y];
-      head_[y] = tail_[y] = kEnd;
-      size_[y] = 0;
-    }
-    return x;
-  }
-
- private:
-  bool distinct(std::size_t base) const {
-    return label_[base] != label_[base + 1] && label_[base + 1] != label_[base + 2] &&
-           label_[base + 2] != label_[base];
-  }
-  void append(std::uint32_t label, std::uint32_t slot) {
-    if (head_[label] == kEnd) {
-      head_[label] = slot;
-    } else {
-      next_[tail_[label]] = slot;
-    }
-    tail_[label] = slot;
-    ++size_[label];
-  }
-
-  std::vector<std::uint32_t> label_, next_, head_, tail_, size_;
-  TripleCounter faces_;
-};
-
 // Merging clusters that are not face neighbours costs this many times its error increase: such a union is
 // not a compact region and its triangles tend to fold over its neighbours', so it should wait, but not for
 // every neighbour merge however expensive (that leaves small clusters stranded beside large ones).
 constexpr double kDetachedPenalty = 4.0;
 
-struct Candidate {
+// A node's cheapest merge; the order is total (cost, then the pair's ids), so the merge sequence does not
+// depend on how the heap happens to be laid out.
+struct Best {
   double cost;
   std::uint32_t a, b;  // a < b
-  std::uint32_t version_a, version_b;
-  // priority_queue pops the largest: make the cheapest (then the lowest pair) the largest.
-  bool operator<(const Candidate& o) const {
-    if (cost != o.cost) return cost > o.cost;
-    if (a != o.a) return a > o.a;
-    return b > o.b;
-  }
+  std::uint32_t node;
 };
+bool before(const Best& x, const Best& y) {
+  if (x.cost != y.cost) return x.cost < y.cost;
+  if (x.a != y.a) return x.a < y.a;
+  return x.b < y.b;
+}
+
+// 4-ary min-heap of the nodes' cheapest merges with the nodes' positions, so that a node's entry is
+// replaced rather than pushed anew. An entry leaves out the pair's second cluster: the first sits at only one
+// node, so two entries never tie on (cost, first), and 16 bytes put four siblings in a cache line or two.
+class NodeHeap {
+ public:
+  explicit NodeHeap(std::size_t nodes) : position_(nodes, kEnd) {}
+  bool empty() const { return heap_.empty(); }
+  std::uint32_t top() const { return heap_.front().node; }
+
+  // Sets the node's entry (inserting it when absent).
+  void set(const Best& best) {
+    const Entry entry{best.cost, best.a, best.node};
+    std::uint32_t i = position_[best.node];
+    if (i == kEnd) {
+      i = static_cast<std::uint32_t>(heap_.size());
+      heap_.push_back(entry);
+      up(i, entry);
+      return;
+    }
+    if (before(entry, heap_[i])) {
+      up(i, entry);
+    } else {
+      down(i, entry);
+    }
+  }
+  void erase(std::uint32_t node) {
+    const std::uint32_t i = position_[node];
+    if (i == kEnd) return;
+    position_[node] = kEnd;
+    const Entry last = heap_.back();
+    heap_.pop_back();
+    if (i == heap_.size()) return;
+    if (before(last, heap_[i])) {
+      up(i, last);
+    } else {
+      down(i, last);
+    }
+  }
+  // Builds the heap from entries of distinct nodes at once.
+  void assign(const std::vector<Best>& entries) {
+    heap_.clear();
+    for (const Best& b : entries) heap_.push_back({b.cost, b.a, b.node});
+    for (std::size_t i = heap_.size() / 4 + 1; i-- > 0;) {
+      if (i < heap_.size()) down(static_cast<std::uint32_t>(i), heap_[i]);
+    }
+    for (std::size_t i = 0; i < heap_.size(); ++i) position_[heap_[i].node] = static_cast<std::uint32_t>(i);
+  }
+
+ private:
+  struct Entry {
+    double cost;
+    std::uint32_t a, node;
+  };
+  static bool before(const Entry& x, const Entry& y) {
+    return x.cost != y.cost ? x.cost < y.cost : x.a < y.a;
+  }
+  // Moves `item` from position i towards the root to where it belongs.
+  void up(std::uint32_t i, const Entry item) {
+    while (i > 0) {
+      const std::uint32_t parent = (i - 1) / 4;
+      if (!before(item, heap_[parent])) break;
+      heap_[i] = heap_[parent];
+      position_[heap_[i].node] = i;
+      i = parent;
+    }
+    heap_[i] = item;
+    position_[item.node] = i;
+  }
+  void down(std::uint32_t i, const Entry item) {
+    const std::size_t size = heap_.size();
+    for (;;) {
+      const std::size_t first = 4 * std::size_t{i} + 1;
+      if (first >= size) break;
+      std::size_t child = first;
+      const std::size_t last = std::min(first + 4, size);
+      for (std::size_t c = first + 1; c < last; ++c) {
+        if (before(heap_[c], heap_[child])) child = c;
+      }
+      if (!before(heap_[child], item)) break;
+      heap_[i] = heap_[child];
+      position_[heap_[i].node] = i;
+      i = static_cast<std::uint32_t>(child);
+    }
+    heap_[i] = item;
+    position_[item.node] = i;
+  }
+
+  std::vector<Entry> heap_;
+  std::vector<std::uint32_t> position_;
+};
+
+// An internal node of the octree: its child slots, where their pairs are stored, and how far it is from
+// handing a single cluster up. One cache line: the merge loop reaches nodes in no order.
+struct alignas(64) Node {
+  std::uint64_t pairs = 0;  // first of its children * (children - 1) / 2 pairs
+  std::array<std::uint32_t, 8> member{kEnd, kEnd, kEnd, kEnd, kEnd, kEnd, kEnd, kEnd};  // per slot, or kEnd
+  std::uint32_t parent = kEnd;
+  std::uint8_t children = 0;
+  std::uint8_t pending = 0;  // children still to hand their cluster up
+  std::uint8_t present = 0;  // clusters sitting at the node
+  std::uint8_t octant = 0;   // which octant of its parent it is (the low three bits of its Morton prefix)
+  std::uint8_t slot = 0;     // which of its parent's slots it fills (children are numbered in Morton order)
+  // Its cheapest pair, the one its heap entry stands for: the merge needs no look into the pair table.
+  std::uint8_t best_i = 0, best_j = 0;
+  double best_error = 0;
+};
+static_assert(sizeof(Node) == 64);
+
+// A pair of clusters at a node: its merge cost, and the merged cluster's error, which the merge takes over.
+struct Pair {
+  double cost, error;
+};
+
+struct Cluster {
+  PlacementSums sums;
+  double error = 0;
+  std::uint32_t node = kEnd;  // the node it sits at (kEnd: above the root)
+  // The octants of its node it covers: two clusters are neighbours when an octant of one shares a face
+  // with an octant of the other (the octant numbers differ in one bit).
+  std::uint8_t octants = 0;
+  std::uint8_t slot = 0;  // which of the node's slots it fills
+};
+
+// A triangle of three distinct cluster ids, ascending.
+struct Face {
+  std::uint32_t a, b, c;
+};
+
+// The distinct faces a clustering leaves of a list of faces, each corner mapped through `label`. The faces
+// are bucketed by their lowest label (a counting sort) and each bucket is deduplicated on its own: ids of
+// nearby cells are close and the list keeps the order of its lowest labels, so both passes run nearly
+// sequentially through memory, where a hash set of faces would miss the cache on every face.
+class FaceCounter {
+ public:
+  // The count, `label` mapping to ids below `labels`; with `kept`, also the distinct faces themselves,
+  // ordered by (a, b, c).
+  template <class Label>
+  std::size_t count(const std::vector<Face>& faces, std::size_t labels, Label&& label,
+                    std::vector<Face>* kept) {
+    end_.assign(labels + 1, 0);
+    relabelled_.clear();
+    for (const Face& f : faces) {
+      std::uint32_t a = label(f.a), b = label(f.b), c = label(f.c);
+      if (a == b || b == c || c == a) continue;
+      if (a > b) std::swap(a, b);
+      if (b > c) std::swap(b, c);
+      if (a > b) std::swap(a, b);
+      relabelled_.push_back({a, b, c});
+      ++end_[a + 1];
+    }
+    for (std::size_t i = 1; i < end_.size(); ++i) end_[i] += end_[i - 1];
+    bucketed_.resize(relabelled_.size());
+    for (const Face& f : relabelled_) bucketed_[end_[f.a]++] = f;
+    if (kept) kept->clear();
+    std::size_t distinct = 0;
+    auto later = [](const Face& x, const Face& y) { return x.b != y.b ? x.b < y.b : x.c < y.c; };
+    for (std::size_t begin = 0; begin < bucketed_.size();) {
+      std::size_t end = begin + 1;
+      while (end < bucketed_.size() && bucketed_[end].a == bucketed_[begin].a) ++end;
+      Face* run = bucketed_.data();
+      std::sort(run + begin, run + end, later);
+      for (std::size_t i = begin; i < end; ++i) {
+        if (i > begin && run[i].b == run[i - 1].b && run[i].c == run[i - 1].c) continue;
+        ++distinct;
+        if (kept) kept->push_back(run[i]);
+      }
+      begin = end;
+    }
+    return distinct;
+  }
+
+ private:
+  std::vector<std::size_t> end_;
+  std::vector<Face> relabelled_, bucketed_;
+};
+
+std::uint32_t find_root(std::vector<std::uint32_t>& up, std::uint32_t x) {
+  std::uint32_t r = x;
+  while (up[r] != r) r = up[r];
+  while (up[x] != r) {
+    const std::uint32_t next = up[x];
+    up[x] = r;
+    x = next;
+  }
+  return r;
+}
+
+// Position of the pair of child slots i < j in a node's triangular cost table.
+inline std::size_t pair_index(std::uint32_t i, std::uint32_t j) {
+  return std::size_t{j} * (j - 1) / 2 + i;
+}
 
 }  // namespace
 
@@ -202,41 +267,42 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   for (int l = 1; l <= levels; ++l)
     offset[l] = offset[l - 1] + static_cast<std::uint32_t>(prefix[l - 1].size());
   const std::size_t nodes = offset[levels];
-  std::vector<std::uint8_t> pending(nodes, 0), member_count(nodes, 0);
-  std::vector<std::array<std::uint32_t, 8>> members(nodes);
-  std::vector<std::uint32_t> node_parent(nodes, kEnd);
+  std::vector<Node> node(nodes);
   std::vector<std::uint32_t> cell_node(n, kEnd);
-  // Which octant of its parent each node and each fine cell is (the low three bits of its Morton prefix).
-  std::vector<std::uint8_t> node_octant(nodes, 0), cell_octant(n, 0);
+  std::vector<std::uint8_t> cell_octant(n, 0), cell_slot(n, 0);
   for (int l = 1; l <= levels; ++l) {
     for (std::size_t i = 0; i < prefix[l].size(); ++i) {
       const std::uint32_t up = offset[l - 1] + parent[l][i];
-      ++pending[up];
+      const std::uint8_t slot = node[up].children++;
+      const auto octant = static_cast<std::uint8_t>(prefix[l][i] & 7);
       if (l < levels) {
-        node_parent[offset[l] + i] = up;
-        node_octant[offset[l] + i] = static_cast<std::uint8_t>(prefix[l][i] & 7);
+        Node& v = node[offset[l] + i];
+        v.parent = up;
+        v.octant = octant;
+        v.slot = slot;
       } else {
         cell_node[i] = up;
-        cell_octant[i] = static_cast<std::uint8_t>(prefix[l][i] & 7);
+        cell_octant[i] = octant;
+        cell_slot[i] = slot;
       }
     }
   }
   prefix = {};
   parent = {};
+  std::uint64_t pairs_total = 0;
+  for (Node& v : node) {
+    v.pending = v.children;
+    v.pairs = pairs_total;
+    pairs_total += std::uint64_t{v.children} * (v.children - 1) / 2;
+  }
+  std::vector<Pair> pairs(pairs_total);
 
   // Clusters start as the fine cells.
-  std::vector<PlacementSums> sums(n);
-  std::vector<double> error(n);
-  std::vector<std::uint32_t> version(n, 0), union_of(n);
-  std::vector<std::uint8_t> alive(n, 1);
+  std::vector<Cluster> cluster(n);
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    sums[i] = cell_placement_sums(cells, i, boundary_weight);
-    error[i] = place(sums[i], representative).error;
-    union_of[i] = static_cast<std::uint32_t>(i);
+    cluster[i].sums = cell_placement_sums(cells, i, boundary_weight);
+    cluster[i].error = place(cluster[i].sums, representative).error;
   });
-  // The octants of its node that each cluster covers. Two clusters are neighbours when an octant of one
-  // shares a face with an octant of the other (the octant numbers differ in one bit).
-  std::vector<std::uint8_t> octants(n, 0);
   static constexpr auto kNeighbours = [] {
     std::array<std::uint8_t, 256> near{};
     for (unsigned mask = 0; mask < 256; ++mask) {
@@ -247,117 +313,265 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     }
     return near;
   }();
-  std::priority_queue<Candidate> queue;
-  auto cost_of = [&](std::uint32_t a, std::uint32_t b, bool detached) {
-    PlacementSums merged = sums[a];
-    merged.add(sums[b]);
-    const double cost = place(merged, representative).error - error[a] - error[b];
-    return detached ? cost * kDetachedPenalty : cost;
-  };
-  // While the tree is first filled, pairs are only listed; their costs (a placement each, most of the
-  // merge's arithmetic) are then taken in parallel and the queue is heapified from them at once. The pairs
-  // are distinct and the order is total, so it pops exactly as if each had been pushed as it came.
-  bool listing = true;
-  std::vector<Candidate> listed;
-  auto push = [&](std::uint32_t a, std::uint32_t b) {
+  // The sums are added lower id first, as the merge itself adds them, so the pair holds the merge's error.
+  auto pair_of = [&](std::uint32_t a, std::uint32_t b) {
     if (a > b) std::swap(a, b);
+    const Cluster &x = cluster[a], &y = cluster[b];
     // The octant masks change as clusters move up: the neighbour test is of this moment.
-    const bool detached = !(kNeighbours[octants[a]] & octants[b]);
-    if (listing) {
-      listed.push_back({detached ? 1.0 : 0.0, a, b, version[a], version[b]});  // cost: the flag, for now
-      return;
-    }
-    queue.push({cost_of(a, b, detached), a, b, version[a], version[b]});
+    const bool detached = !(kNeighbours[x.octants] & y.octants);
+    PlacementSums merged = x.sums;
+    merged.add(y.sums);
+    const double error = place(merged, representative).error;
+    const double cost = error - x.error - y.error;
+    return Pair{detached ? cost * kDetachedPenalty : cost, error};
   };
-  std::vector<std::uint32_t> at(n, kEnd);  // the node a live cluster sits at (kEnd: the root's level)
-  // Cluster c is the whole of a child of `node`: it joins the node's members, pairing with each, and while
-  // it is the whole of the node too, moves on up.
-  auto arrive = [&](std::uint32_t c, std::uint32_t node, std::uint8_t octant) {
-    while (node != kEnd) {
-      octants[c] = static_cast<std::uint8_t>(1u << octant);
-      --pending[node];
-      std::array<std::uint32_t, 8>& m = members[node];
-      for (std::uint8_t k = 0; k < member_count[node]; ++k) push(c, m[k]);
-      m[member_count[node]++] = c;
-      at[c] = node;
-      if (pending[node] != 0 || member_count[node] != 1) return;
-      member_count[node] = 0;
-      at[c] = kEnd;
-      octant = node_octant[node];
-      node = node_parent[node];
+  // The node's clusters and pairs lie scattered: ask for all of them before the first is needed.
+  auto prefetch = [&](const Node& v) {
+    for (std::uint32_t k = 0; k < v.children; ++k) {
+      if (v.member[k] == kEnd) continue;
+      const char* p = reinterpret_cast<const char*>(&cluster[v.member[k]]);
+      for (std::size_t line = 0; line < sizeof(Cluster); line += 64) __builtin_prefetch(p + line);
+    }
+    const char* p = reinterpret_cast<const char*>(&pairs[v.pairs]);
+    for (std::size_t line = 0; line < sizeof(Pair) * v.children * (v.children - 1) / 2; line += 64) {
+      __builtin_prefetch(p + line);
     }
   };
-  for (std::size_t i = 0; i < n; ++i) arrive(static_cast<std::uint32_t>(i), cell_node[i], cell_octant[i]);
-  cell_node = {};
-  tbb::parallel_for(std::size_t{0}, listed.size(), [&](std::size_t k) {
-    Candidate& c = listed[k];
-    c.cost = cost_of(c.a, c.b, c.cost != 0.0);
-  });
-  queue = std::priority_queue<Candidate>(std::less<Candidate>(), std::move(listed));
-  listing = false;
-
-  std::unique_ptr<FaceTracker> faces;
-  std::vector<std::uint32_t> label;
-  if (target.faces > 0) {
-    faces = std::make_unique<FaceTracker>(cells.triangles, n);
-    label.resize(n);
-    for (std::size_t i = 0; i < n; ++i) label[i] = static_cast<std::uint32_t>(i);
-  }
-  auto done = [&](std::size_t live) {
-    if (target.faces > 0) return faces->faces() <= target.faces;
-    return live <= target.vertices;
+  // Costs of cluster c's pairs with the other clusters at its node.
+  auto pair_up = [&](std::uint32_t c) {
+    const Node& v = node[cluster[c].node];
+    const std::uint32_t s = cluster[c].slot;
+    const std::uint32_t* slot = v.member.data();
+    Pair* pair = &pairs[v.pairs];
+    for (std::uint32_t k = 0; k < v.children; ++k) {
+      if (k == s || slot[k] == kEnd) continue;
+      pair[k < s ? pair_index(k, s) : pair_index(s, k)] = pair_of(c, slot[k]);
+    }
   };
-
-  std::size_t live = n;
-  std::size_t merges = 0;
-  const std::size_t expected = target.faces > 0 ? 0 : (n > target.vertices ? n - target.vertices : 0);
-  while (!done(live) && !queue.empty()) {
-    const Candidate c = queue.top();
-    queue.pop();
-    if (!alive[c.a] || !alive[c.b] || version[c.a] != c.version_a || version[c.b] != c.version_b) continue;
-    const std::uint32_t a = c.a, b = c.b, node = at[a];
-    sums[a].add(sums[b]);
-    octants[a] |= octants[b];
-    error[a] = place(sums[a], representative).error;
-    ++version[a];
-    alive[b] = 0;
-    union_of[b] = a;
-    sums[b] = PlacementSums();
-    if (faces) label[a] = faces->merge(label[a], label[b]);
-    --live;
-    if (++merges % 4096 == 0) report(progress, "cluster: merge", merges, expected);
-    // Drop b from the node; a either completes the node and moves up, or pairs anew with the rest.
-    std::array<std::uint32_t, 8>& m = members[node];
-    std::uint8_t count = member_count[node];
-    for (std::uint8_t k = 0; k < count; ++k) {
-      if (m[k] == b) {
-        m[k] = m[--count];
-        break;
+  // The node's cheapest pair; false when fewer than two clusters sit there.
+  // Remembers it in the node.
+  auto best_of = [&](std::uint32_t id, Best& best) {
+    Node& v = node[id];
+    const std::uint32_t* slot = v.member.data();
+    const Pair* pair = &pairs[v.pairs];
+    bool found = false;
+    for (std::uint32_t j = 1; j < v.children; ++j) {
+      if (slot[j] == kEnd) continue;
+      for (std::uint32_t i = 0; i < j; ++i) {
+        if (slot[i] == kEnd) continue;
+        const Best candidate{pair[pair_index(i, j)].cost, std::min(slot[i], slot[j]),
+                             std::max(slot[i], slot[j]), id};
+        if (!found || before(candidate, best)) {
+          best = candidate;
+          v.best_i = static_cast<std::uint8_t>(i);
+          v.best_j = static_cast<std::uint8_t>(j);
+        }
+        found = true;
       }
     }
-    member_count[node] = count;
-    if (pending[node] == 0 && count == 1) {
-      member_count[node] = 0;
-      at[a] = kEnd;
-      arrive(a, node_parent[node], node_octant[node]);
-    } else {
-      for (std::uint8_t k = 0; k < count; ++k)
-        if (m[k] != a) push(a, m[k]);
+    if (found) v.best_error = pair[pair_index(v.best_i, v.best_j)].error;
+    return found;
+  };
+  // Cluster c is the whole of a child of node `id`: it takes its slot there and, while it is the whole of
+  // the node too, moves on up. Returns the node it stays at (kEnd above the root).
+  auto arrive = [&](std::uint32_t c, std::uint32_t id, std::uint8_t octant, std::uint8_t slot) {
+    Cluster& x = cluster[c];
+    while (id != kEnd) {
+      Node& v = node[id];
+      x.octants = static_cast<std::uint8_t>(1u << octant);
+      --v.pending;
+      if (v.pending != 0 || v.present != 0) {
+        v.member[slot] = c;
+        ++v.present;
+        x.node = id;
+        x.slot = slot;
+        return id;
+      }
+      octant = v.octant;
+      slot = v.slot;
+      id = v.parent;
     }
+    x.node = kEnd;
+    return kEnd;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    arrive(static_cast<std::uint32_t>(i), cell_node[i], cell_octant[i], cell_slot[i]);
   }
-  result.target_met = target.faces > 0 ? faces->faces() <= target.faces : live == target.vertices;
+  cell_node = {};
+  cell_octant = {};
+  cell_slot = {};
+  // The first costs, a placement each and most of the merge's arithmetic, are taken in parallel, node by
+  // node; every pair's cost is what it would be had it been taken as its second cluster arrived.
+  NodeHeap heap(nodes);
+  {
+    tbb::parallel_for(std::size_t{0}, nodes, [&](std::size_t id) {
+      const Node& v = node[id];
+      if (v.present < 2) return;
+      const std::uint32_t* slot = v.member.data();
+      Pair* pair = &pairs[v.pairs];
+      for (std::uint32_t j = 1; j < v.children; ++j) {
+        if (slot[j] == kEnd) continue;
+        for (std::uint32_t i = 0; i < j; ++i) {
+          if (slot[i] != kEnd) pair[pair_index(i, j)] = pair_of(slot[i], slot[j]);
+        }
+      }
+    });
+    std::vector<Best> entries;
+    for (std::size_t id = 0; id < nodes; ++id) {
+      Best best{};
+      if (node[id].present >= 2 && best_of(static_cast<std::uint32_t>(id), best)) entries.push_back(best);
+    }
+    heap.assign(entries);
+  }
+
+  // The merges in order, survivor (the lower id) first.
+  std::vector<std::array<std::uint32_t, 2>> merges;
+  const std::size_t expected = target.faces > 0 ? 0 : (n > target.vertices ? n - target.vertices : 0);
+  merges.reserve(expected);
+  auto merge_next = [&] {
+    if (heap.empty()) return false;
+    const std::uint32_t id = heap.top();
+    Node& v = node[id];
+    prefetch(v);
+    const std::uint32_t a = std::min(v.member[v.best_i], v.member[v.best_j]);
+    const std::uint32_t b = std::max(v.member[v.best_i], v.member[v.best_j]);
+    Cluster &x = cluster[a], &y = cluster[b];
+    x.sums.add(y.sums);
+    x.octants |= y.octants;
+    x.error = v.best_error;
+    v.member[y.slot] = kEnd;
+    y.node = kEnd;
+    --v.present;
+    merges.push_back({a, b});
+    if (merges.size() % 4096 == 0) report(progress, "cluster: merge", merges.size(), expected);
+    if (v.pending == 0 && v.present == 1) {
+      // a is the whole node now: it leaves for the parent and pairs with the clusters there.
+      heap.erase(id);
+      v.member[x.slot] = kEnd;
+      v.present = 0;
+      const std::uint32_t up = arrive(a, v.parent, v.octant, v.slot);
+      if (up != kEnd && node[up].present >= 2) {
+        prefetch(node[up]);
+        pair_up(a);
+        Best best{};
+        best_of(up, best);
+        heap.set(best);
+      }
+      return true;
+    }
+    Best best{};
+    if (v.present >= 2) {
+      pair_up(a);
+      best_of(id, best);
+      heap.set(best);
+    } else {
+      heap.erase(id);
+    }
+    return true;
+  };
+
+  std::size_t kept = 0;
+  if (target.faces == 0) {
+    while (n - merges.size() > target.vertices && merge_next()) {
+    }
+    kept = merges.size();
+    result.target_met = n - kept == target.vertices;
+  } else {
+    // The face count after m merges only falls with m; find the first m at which it is within the target.
+    std::vector<Face> faces;
+    faces.reserve(cells.triangles.size());
+    for (const CellTriangle& t : cells.triangles) faces.push_back({t.first(), t.second(), t.third()});
+    std::vector<std::uint32_t> root(n);
+    for (std::size_t i = 0; i < n; ++i) root[i] = static_cast<std::uint32_t>(i);
+    FaceCounter counter;
+    std::vector<Face> next;
+    std::size_t count = faces.size();
+    // Faces a merge removes, estimated from the last batch; a fine mesh loses about two a merge. A batch
+    // aims short of the target, as a recount costs about one bisection step, until the batch crossing it
+    // is short.
+    double rate = 2.0;
+    result.target_met = count <= target.faces;
+    while (count > target.faces) {
+      const double gap = static_cast<double>(count - target.faces);
+      const double expected_merges = gap / rate;
+      const std::size_t batch = expected_merges > 64
+                                    ? static_cast<std::size_t>(0.9 * expected_merges)
+                                    : static_cast<std::size_t>(std::ceil(expected_merges)) + 4;
+      const std::size_t start = merges.size();
+      while (merges.size() - start < batch && merge_next()) {
+      }
+      const std::size_t done = merges.size() - start;
+      if (done == 0) break;  // nothing left to merge: the target is out of reach
+      for (std::size_t m = start; m < merges.size(); ++m) root[merges[m][1]] = merges[m][0];
+      const std::size_t now = counter.count(
+          faces, n, [&](std::uint32_t c) { return find_root(root, c); }, &next);
+      if (now > target.faces) {
+        rate = std::max(static_cast<double>(count - now) / static_cast<double>(done), 1e-3);
+        count = now;
+        faces.swap(next);
+        if (done < batch) break;  // the heap ran dry above the target
+        continue;
+      }
+      // The target was crossed inside this batch: bisect for the first merge count within it. The faces
+      // are labelled as at the batch's start; a probe replays a prefix of the batch on top. Only faces with
+      // a cluster the batch merges can change, and they stay distinct from the others (they keep such a
+      // cluster), so a probe counts those alone, its clusters numbered densely.
+      std::vector<std::uint32_t> dense(n, kEnd);
+      std::uint32_t ids = 0;
+      std::vector<std::array<std::uint32_t, 2>> replay(done);
+      for (std::size_t m = 0; m < done; ++m) {
+        for (int k = 0; k < 2; ++k) {
+          std::uint32_t& d = dense[merges[start + m][k]];
+          if (d == kEnd) d = ids++;
+          replay[m][k] = d;
+        }
+      }
+      const std::uint32_t involved = ids;
+      std::vector<Face> affected;
+      for (const Face& f : faces) {
+        if (dense[f.a] >= involved && dense[f.b] >= involved && dense[f.c] >= involved) continue;
+        Face g;
+        for (std::uint32_t Face::*corner : {&Face::a, &Face::b, &Face::c}) {
+          std::uint32_t& d = dense[f.*corner];
+          if (d == kEnd) d = ids++;
+          g.*corner = d;
+        }
+        affected.push_back(g);
+      }
+      const std::size_t unaffected = count - affected.size();
+      faces.swap(affected);
+      dense = {};
+      std::vector<std::uint32_t> probe(ids);
+      for (std::uint32_t i = 0; i < ids; ++i) probe[i] = i;
+      std::size_t lo = 0, hi = done;  // over the target after lo merges of the batch, within it after hi
+      while (hi - lo > 1) {
+        const std::size_t mid = lo + (hi - lo) / 2;
+        for (std::size_t m = 0; m < mid; ++m) probe[replay[m][1]] = replay[m][0];
+        const std::size_t faces_mid =
+            unaffected + counter.count(
+                             faces, ids, [&](std::uint32_t c) { return find_root(probe, c); }, nullptr);
+        // Only the merged-away clusters' entries changed (path compression rewrites nothing else).
+        for (std::size_t m = 0; m < mid; ++m) probe[replay[m][1]] = replay[m][1];
+        if (faces_mid <= target.faces) {
+          hi = mid;
+        } else {
+          lo = mid;
+        }
+      }
+      merges.resize(start + hi);
+      count = target.faces;
+      result.target_met = true;
+    }
+    kept = merges.size();
+  }
 
   // Number clusters by their first fine cell.
+  std::vector<std::uint32_t> union_of(n);
+  for (std::size_t i = 0; i < n; ++i) union_of[i] = static_cast<std::uint32_t>(i);
+  for (std::size_t m = 0; m < kept; ++m) union_of[merges[m][1]] = merges[m][0];
   std::vector<std::uint32_t> id(n, kEnd);
   for (std::size_t i = 0; i < n; ++i) {
-    std::uint32_t r = static_cast<std::uint32_t>(i);
-    while (union_of[r] != r) r = union_of[r];
-    // Path compression keeps later finds short.
-    for (std::uint32_t x = static_cast<std::uint32_t>(i); union_of[x] != r;) {
-      const std::uint32_t up = union_of[x];
-      union_of[x] = r;
-      x = up;
-    }
+    const std::uint32_t r = find_root(union_of, static_cast<std::uint32_t>(i));
     if (id[r] == kEnd) id[r] = result.count++;
     result.cluster_of[i] = id[r];
   }

@@ -275,6 +275,69 @@ TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
   }
 }
 
+// A face target stops the very merge sequence a vertex target runs, at the first merge that brings the face
+// count within the target (found by recounting batches of merges and bisecting the batch that crosses it):
+// the result is the vertex-target result of its own vertex count, one merge fewer is over the target, and
+// no thread count changes a bit.
+TEST(Cluster, OctreeFaceTargetStopsAtTheFirstMergeWithinIt) {
+  const IndexedMesh mesh = tilted(lumpy_sphere_with_holes());
+  for (std::uint64_t faces : {40ull, 301ull, 1000ull, 4000ull}) {
+    ClusterOptions by_faces;
+    by_faces.octree = true;
+    by_faces.target_faces = faces;
+    by_faces.threads = 1;
+    ClusterStats stats;
+    const QuadricMesh out = run(mesh, by_faces, &stats);
+    ASSERT_TRUE(stats.target_met);
+    ASSERT_LE(out.mesh.face_count(), faces);
+    const std::uint64_t vertices = out.mesh.vertex_count();
+    ASSERT_LT(vertices, stats.fine_cells) << "the target must take merges";
+
+    // The same fine grid for a vertex target: as many fine cells per target.
+    const double fine_cells = by_faces.fine_cells_per_target * static_cast<double>(faces) / 2.0;
+    auto by_vertices = [&](std::uint64_t n, ClusterStats& s) {
+      ClusterOptions o;
+      o.octree = true;
+      o.target_vertices = n;
+      o.fine_cells_per_target = fine_cells / static_cast<double>(n);
+      o.threads = 1;
+      return run(mesh, o, &s);
+    };
+    ClusterStats same_stats, fewer_stats;
+    const QuadricMesh same = by_vertices(vertices, same_stats);
+    ASSERT_EQ(same_stats.fine_grid, stats.fine_grid);
+    ASSERT_EQ(same_stats.fine_cells, stats.fine_cells);
+    EXPECT_TRUE(same_bytes(out, same)) << faces << " faces";
+    const QuadricMesh fewer = by_vertices(vertices + 1, fewer_stats);
+    ASSERT_EQ(fewer_stats.fine_grid, stats.fine_grid);
+    EXPECT_GT(fewer.mesh.face_count(), faces);
+
+    for (unsigned threads : {2u, 3u}) {
+      by_faces.threads = threads;
+      EXPECT_TRUE(same_bytes(out, run(mesh, by_faces))) << faces << " faces, " << threads << " threads";
+    }
+  }
+}
+
+// Exactly N vertices for every N of a run of consecutive targets, whatever the thread count: the merge takes
+// one pair at a time.
+TEST(Cluster, OctreeVertexTargetIsExactForConsecutiveCounts) {
+  const IndexedMesh mesh = tilted(test::sphere(4));
+  for (std::uint64_t n = 95; n <= 105; ++n) {
+    ClusterOptions options;
+    options.octree = true;
+    options.target_vertices = n;
+    options.fine_cells_per_target = 16;
+    options.threads = 1;
+    ClusterStats stats;
+    const QuadricMesh one = run(mesh, options, &stats);
+    EXPECT_EQ(one.mesh.vertex_count(), n);
+    EXPECT_TRUE(stats.target_met);
+    options.threads = 2;
+    EXPECT_TRUE(same_bytes(one, run(mesh, options))) << n;
+  }
+}
+
 TEST(Cluster, OctreeBeatsTheUniformGridAtEqualVertexCount) {
   // A box elongated along x with one bumpy end: flat cells should grow, bumpy ones stay small.
   IndexedMesh mesh = test::sphere(6);
