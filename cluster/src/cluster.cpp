@@ -127,6 +127,7 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
       Attributes a;
       write_attributes(cells, i, a);
       store_attributes(cells, a, sums.points, i, mesh);
+      if (options.border_in_quadrics) cells.quadrics[i] = sums.quadric;
     });
     out.quadrics = std::move(cells.quadrics);
     triangles.reserve(cells.triangles.size());
@@ -148,8 +149,9 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
       Attributes a;
       for (std::uint32_t k = first[c]; k < first[c + 1]; ++k) {
         const std::uint32_t i = member[k];
-        sums.add(cell_placement_sums(cells, i, options.boundary_weight));
-        surface += cells.quadrics[i];
+        const PlacementSums cell = cell_placement_sums(cells, i, options.boundary_weight);
+        sums.add(cell);
+        surface += options.border_in_quadrics ? cell.quadric : cells.quadrics[i];
         write_attributes(cells, i, a);
       }
       mesh.positions[c] = place(sums, options.representative).point.cast<float>();

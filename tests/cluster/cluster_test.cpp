@@ -460,6 +460,53 @@ TEST(Cluster, ShufflingTrianglesChangesNothingButRounding) {
   }
 }
 
+TEST(Cluster, BorderPlanesRideInTheQuadricsOnRequest) {
+  IndexedMesh square = test::grid_square(120);
+  const Eigen::Matrix3f spin = Eigen::AngleAxisf(0.35f, Vec3f::UnitZ()).toRotationMatrix();
+  for (Vec3f& p : square.positions) p = spin * p;
+  // Distance from a point of the plane to the square's border.
+  auto border_gap = [&](const Vec3d& p) {
+    const Vec3d q = spin.cast<double>().transpose() * p;
+    return std::min({std::abs(q.x()), std::abs(q.x() - 1), std::abs(q.y()), std::abs(q.y() - 1)});
+  };
+  for (int octree = 0; octree < 2; ++octree) {
+    ClusterOptions options = grid_options(12);
+    if (octree == 1) {
+      options.octree = true;
+      options.target_vertices = 60;
+    }
+    const QuadricMesh plain = run(square, options);
+    options.border_in_quadrics = true;
+    const QuadricMesh carried = run(square, options);
+    // Same cells and vertices; only the quadrics differ.
+    ASSERT_EQ(plain.mesh.positions, carried.mesh.positions);
+    ASSERT_EQ(plain.quadrics.size(), carried.quadrics.size());
+    std::size_t border_outputs = 0, interior_outputs = 0;
+    for (std::size_t v = 0; v < carried.quadrics.size(); ++v) {
+      const Vec3d p = carried.mesh.positions[v].cast<double>();
+      // Sliding within the plane, across the border's direction whatever it is, costs nothing with the
+      // surface planes alone.
+      for (const Vec3d& step : {Vec3d(0.03, 0.0, 0.0), Vec3d(0.0, 0.03, 0.0)}) {
+        EXPECT_NEAR(plain.quadrics[v].evaluate(p + step), plain.quadrics[v].evaluate(p), 1e-9);
+      }
+      // A vertex on the border now resists leaving it; one far inside still slides freely.
+      const double rise = std::max(carried.quadrics[v].evaluate(p + Vec3d(0.03, 0, 0)),
+                                   carried.quadrics[v].evaluate(p + Vec3d(0, 0.03, 0))) -
+                          carried.quadrics[v].evaluate(p);
+      const double gap = border_gap(p);
+      if (gap < 1e-3) {
+        ++border_outputs;
+        EXPECT_GT(rise, 1e-7) << v;
+      } else if (gap > 0.25) {
+        ++interior_outputs;
+        EXPECT_NEAR(rise, 0.0, 1e-7) << v;
+      }
+    }
+    EXPECT_GT(border_outputs, 12u);
+    EXPECT_GT(interior_outputs, 0u);
+  }
+}
+
 TEST(Cluster, OutputQuadricsSumTheInputSurfaceQuadrics) {
   const IndexedMesh mesh = tilted(lumpy_sphere_with_holes());
   Quadric expected;

@@ -107,6 +107,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   ClusterOptions cluster_options = options.cluster;
   cluster_options.octree = true;
   cluster_options.target_vertices = 0;
+  // The original's border planes ride in the quadrics; the decimator's own would see the clustered mesh's
+  // spurious borders and folds (see borders_carried).
+  cluster_options.border_in_quadrics = cluster_options.preserve_boundary;
   cluster_options.target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
   cluster_options.threads = static_cast<unsigned>(std::max(options.threads, 0));
   cluster_options.progress = options.progress;
@@ -126,6 +129,15 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   stage.target_faces = target;
   stage.target_ratio = 0;
   return stage;
+}
+
+// Whether the first stage's quadrics already hold the original's border planes (clustering with boundary
+// preservation puts them there): the decimator then adds none of its own (boundary_weight 0), since on a
+// clustered mesh it would also constrain spurious borders and the folds of overlapping triangles. Measured on
+// a 10 M scan to 0.1 % through a 1.28 M-face octree intermediate: RMS 0.00119 with the decimator's own border
+// planes, 0.00085 without; pure decimation 0.00065.
+bool borders_carried(const FirstStage& stage, const ClusterOptions& cluster) {
+  return stage.clustered && cluster.preserve_boundary;
 }
 
 void check_common(const SimplifyOptions& options) {
@@ -162,6 +174,7 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   decimate_options.progress = options.progress;
   decimate_options.target_faces = stage.target_faces;
   decimate_options.target_ratio = stage.target_ratio;
+  if (borders_carried(stage, options.cluster)) decimate_options.boundary_weight = 0;
 
   const auto start = Clock::now();
   const std::uint64_t decimate_in = stage.mesh.mesh.face_count();
@@ -217,6 +230,8 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     // The next level starts from this one; its vertices' quadrics are what make its costs distances to the
     // original surface rather than to this level's.
     decimate_options.output_quadrics = i + 1 < levels.size();
+    // Levels after the first take quadrics that already hold the border planes of the level before.
+    if (i > 0 || borders_carried(stage, options.cluster)) decimate_options.boundary_weight = 0;
     const std::uint64_t faces_in = input.mesh.face_count();
     DecimateResult decimated = decimate(std::move(input), decimate_options);
 

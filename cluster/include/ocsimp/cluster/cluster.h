@@ -81,12 +81,18 @@ struct ClusterOptions {
   // direction class. An interior edge is added twice with opposite orientations and cancels; what remains
   // at a cell are the planes of the border (and the bisecting planes of sharp creases) running through it,
   // which the representative is then also fitted to. Needs consistently oriented input: a flipped triangle
-  // makes its edges look like borders. These planes only place vertices: the output quadrics stay those of
-  // the original surface, so the decimator measures distance to the surface alone.
+  // makes its edges look like borders. Unless border_in_quadrics is set, these planes only place vertices:
+  // the output quadrics stay those of the original surface, so the decimator measures distance to the
+  // surface alone.
   bool preserve_boundary = true;
   // Weight of a border crossing relative to a full cell of surface (cell_size^2 of area). A slot's plane
   // weighs the square of its summed normals' length, so cancelled interior edges weigh nothing.
   double boundary_weight = 1.0;
+  // Also add those border (and crease) planes to the output quadrics. A decimator that takes them then knows
+  // the original's borders and needs no border planes of its own: the clustered mesh has spurious borders,
+  // folds and overlapping triangles (where both diagonals of four cells survive) that its own would pin.
+  // The two-stage pipeline sets it and turns the decimator's border planes off.
+  bool border_in_quadrics = false;
 
   unsigned threads = 0;  // 0: all cores. The output does not depend on it.
 
