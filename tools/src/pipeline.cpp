@@ -109,14 +109,13 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     return stage;
   }
   // Intermediate size: a few times the target, as large as both stages' memory allows.
-  // The largest intermediate whose fine cells fit beside the vertex array (fine_cells_for grows with it).
+  // The largest intermediate whose fine cells fit beside the vertex array: fine_cells_for is the full
+  // per-vertex count below the cap, flat at the cap, then the minimum per-vertex count, so its inverse is
+  // room / full below the cap and room / minimum from it on (vertices; twice that in faces).
   const double cell_room = std::max(0.0, budget - vertex_bytes) / kClusterBytesPerCell;
-  double cluster_room = 0;
-  for (double lo = 0, hi = static_cast<double>(faces_hint) + 1, i = 0; i < 64; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (fine_cells_for(mid, fine_per_vertex) <= cell_room ? lo : hi) = mid;
-    cluster_room = lo;
-  }
+  const double cluster_room =
+      2.0 * cell_room /
+      (cell_room < kMaxFineCells ? fine_per_vertex : std::min(kMinFinePerVertex, fine_per_vertex));
   const double decimate_room = budget / kInCoreBytesPerFace;
   const double room = std::min(cluster_room, decimate_room);
   std::uint64_t intermediate_faces;
@@ -174,6 +173,18 @@ void check_common(const SimplifyOptions& options) {
   if (options.intermediate != 0 && options.intermediate < 1) throw Error("--intermediate must be at least 1");
 }
 
+// The fields simplify() and lod() report alike, from the first stage.
+template <class Result>
+void report_first_stage(FirstStage& stage, Result& result) {
+  result.clustered = stage.clustered;
+  result.out_of_core = stage.out_of_core;
+  result.input_faces = stage.input_faces;
+  result.intermediate_faces = stage.intermediate_faces;
+  result.phases = std::move(stage.phases);
+  result.cluster = stage.cluster;
+  result.memory_limit = stage.memory_limit;
+}
+
 }  // namespace
 
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
@@ -189,13 +200,7 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
 
   FirstStage stage = first_stage(input_path, options);
   SimplifyResult result;
-  result.clustered = stage.clustered;
-  result.out_of_core = stage.out_of_core;
-  result.input_faces = stage.input_faces;
-  result.intermediate_faces = stage.intermediate_faces;
-  result.phases = std::move(stage.phases);
-  result.cluster = stage.cluster;
-  result.memory_limit = stage.memory_limit;
+  report_first_stage(stage, result);
 
   DecimateOptions decimate_options = options.decimate;
   decimate_options.max_error = options.max_error;
@@ -237,13 +242,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   FirstStage stage = first_stage(input_path, first);
 
   LodResult result;
-  result.clustered = stage.clustered;
-  result.out_of_core = stage.out_of_core;
-  result.input_faces = stage.input_faces;
-  result.intermediate_faces = stage.intermediate_faces;
-  result.phases = std::move(stage.phases);
-  result.cluster = stage.cluster;
-  result.memory_limit = stage.memory_limit;
+  report_first_stage(stage, result);
 
   QuadricMesh input = std::move(stage.mesh);
   double max_error = 0;
