@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_support.h"
 #include "ocsimp/cluster/cluster.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/io.h"
@@ -34,24 +35,10 @@
 
 namespace {
 
+using ocsimp::bench::median;
+using ocsimp::bench::parse_list;
+
 using Clock = std::chrono::steady_clock;
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
-std::vector<double> parse_list(const std::string& text) {
-  std::vector<double> out;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = text.find(',', start);
-    out.push_back(std::stod(text.substr(start, comma - start)));
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
-}
 
 struct Result {
   ocsimp::IndexedMesh mesh;

@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_support.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/decimate/decimate.h"
 #include "ocsimp/streaming/io.h"
@@ -28,32 +29,11 @@
 
 namespace {
 
+using ocsimp::bench::cpu_seconds;
+using ocsimp::bench::median;
+using ocsimp::bench::parse_list;
+
 using Clock = std::chrono::steady_clock;
-
-// CPU seconds of the whole process (all threads): on a shared machine, wall time also counts other users'
-// load.
-double cpu_seconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
-std::vector<double> parse_list(const std::string& text) {
-  std::vector<double> out;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = text.find(',', start);
-    out.push_back(std::stod(text.substr(start, comma - start)));
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
-}
 
 struct Run {
   ocsimp::IndexedMesh mesh;

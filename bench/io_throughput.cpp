@@ -21,19 +21,16 @@
 #include <string>
 #include <string_view>
 
+#include "bench_support.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/io.h"
 #include "ocsimp/streaming/ply_writer.h"
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using ocsimp::bench::cpu_seconds;
 
-double cpu_seconds() {
-  timespec now{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec);
-}
+using Clock = std::chrono::steady_clock;
 
 // Wall and CPU time from construction to print().
 struct Timer {
