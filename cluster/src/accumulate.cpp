@@ -948,6 +948,60 @@ struct SoupChunk {
   }
 };
 
+// The sums gathered so far, moved onto the grid of half the resolution: a soup gives no vertex array to count
+// cells on before the pass, so a target-driven pass halves its grid whenever the cells outgrow the target,
+// which bounds its memory by the output's size whatever the surface. Every sum is linear, so the result is
+// what a pass on the coarser grid would have gathered, except that the border planes of edges that crossed
+// between sibling cells stay in their parent (a border running through the cell, where a coarse pass would
+// have missed the edges inside it).
+void coarsen_soup(Grid& grid, CellMap& map, std::vector<CellKey>& keys, CellStore& store,
+                  TripleSet<CellKey>& survivors) {
+  grid = grid.coarser();
+  CellMap parents(keys.size() / 4);
+  std::vector<CellKey> parent_keys;
+  CellStore merged;
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    bool inserted;
+    const CellKey key = parent_key(keys[i]);
+    const std::uint32_t to = parents.insert(key, static_cast<std::uint32_t>(parent_keys.size()), inserted);
+    if (inserted) {
+      parent_keys.push_back(key);
+      merged.push_back();
+    }
+    const auto c = key_coords(keys[i]);
+    const Vec3f offset(static_cast<float>(c[0] & 1), static_cast<float>(c[1] & 1),
+                       static_cast<float>(c[2] & 1));
+    const CellRecord& from = store.records[i];
+    CellRecord& record = merged.records[to];
+    record.quadric += from.quadric;
+    // A plane m.x + d = 0 in the child's cell units is m.x' + (d - m.offset) / 2 = 0 in the parent's.
+    for (int a = 0; a < 3; ++a) {
+      const std::array<float, 4>& s = from.border.slot[a];
+      std::array<float, 4>& t = record.border.slot[a];
+      const float shifted = s[3] - (s[0] * offset.x() + s[1] * offset.y() + s[2] * offset.z());
+      t[0] += s[0], t[1] += s[1], t[2] += s[2], t[3] += 0.5f * shifted;
+    }
+    if (CellStore::touched(from.quadric)) merged.touch(to);
+    if (merged.points[to] <= std::numeric_limits<std::uint32_t>::max() - store.points[i]) {
+      merged.points[to] += store.points[i];
+      merged.point_sum[to] += 0.5f * (store.point_sum[i] + static_cast<float>(store.points[i]) * offset);
+    }
+  }
+  std::vector<CellTriple<CellKey>> triples;
+  survivors.drain_into(triples);
+  survivors = TripleSet<CellKey>(triples.size());
+  for (const CellTriple<CellKey>& t : triples) {
+    const CellKey a = parent_key(t.first()), b = parent_key(t.second()), c = parent_key(t.third());
+    if (a == b || b == c || c == a) continue;
+    // The canonical order is the input's orientation when seen forward; keep both flags.
+    if (t.seen_forward()) survivors.add(CellTriple<CellKey>::of(a, b, c));
+    if (t.seen_reversed()) survivors.add(CellTriple<CellKey>::of(a, c, b));
+  }
+  map = std::move(parents);
+  keys = std::move(parent_keys);
+  store = std::move(merged);
+}
+
 FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   FineCells cells;
   cells.grid = options.grid;
@@ -958,7 +1012,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     const int level = std::clamp(static_cast<int>(std::ceil(std::log2(std::max(1.0, side)))), 0, kCoordBits);
     cells.grid = Grid::power_of_two(stream.bounds(), level);
   }
-  const Grid grid = cells.grid;
+  Grid grid = cells.grid;
   // The cells in order of first appearance, chunk by chunk: the numbering, like the sums, follows the input
   // alone.
   CellMap map;
@@ -1023,7 +1077,12 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
       for (const CellTriple<CellKey>& t : chunk.survivors) survivors.add(t);
       cells.surviving_instances += chunk.survivors.size();
     }
+    // Between batches, whose cuts do not depend on the thread count, so neither does the grid.
+    while (options.target_cells > 0 && grid.level > 0 && keys.size() > 2 * options.target_cells) {
+      coarsen_soup(grid, map, keys, store, survivors);
+    }
   });
+  cells.grid = grid;
   chunks = {};
   map = CellMap();
 

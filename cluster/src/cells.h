@@ -78,8 +78,9 @@ struct FineCells {
 
   std::uint64_t input_vertices = 0;
   std::uint64_t input_triangles = 0;
-  std::uint64_t surviving_instances =
-      0;  // input triangles with three distinct cells (before merging repeats)
+  // Input triangles with three distinct cells (before merging repeats); for a soup whose grid was halved
+  // during the pass, counted on the grid each triangle was read on.
+  std::uint64_t surviving_instances = 0;
 
   std::size_t size() const { return keys.size(); }
   bool has_border() const { return !border.empty(); }

@@ -543,6 +543,37 @@ TEST(Cluster, SoupAndIndexedInputAgree) {
   EXPECT_LT(worst, 0.05 * stats.output_cell_size);
 }
 
+// A soup gives no vertex array to count cells on before the pass, so the pass starts from a guess and halves
+// its grid while the cells outnumber twice the target: its memory follows the output, not the guess. Nested
+// spheres occupy several times the cells the guess assumes (one surface spanning the box).
+TEST(Cluster, SoupPassHalvesItsGridWhenCellsOutgrowTheTarget) {
+  IndexedMesh mesh;
+  for (float radius : {1.0f, 0.93f, 0.86f, 0.79f, 0.72f}) {
+    const IndexedMesh shell = test::sphere(5, radius);
+    const auto base = static_cast<Index>(mesh.positions.size());
+    mesh.positions.insert(mesh.positions.end(), shell.positions.begin(), shell.positions.end());
+    for (Triangle t : shell.triangles) mesh.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  mesh = tilted(mesh);
+  ClusterOptions options;
+  options.octree = true;
+  options.target_vertices = 300;
+  const double target_cells = options.fine_cells_per_target * 300;
+  ClusterStats indexed_stats, soup_stats;
+  const QuadricMesh indexed = run(mesh, options, &indexed_stats);
+  const QuadricMesh soup = run(mesh, options, &soup_stats, true);
+  EXPECT_LE(static_cast<double>(soup_stats.fine_cells), 2 * target_cells);
+  EXPECT_EQ(soup_stats.fine_grid, indexed_stats.fine_grid);
+  EXPECT_EQ(soup_stats.fine_cells, indexed_stats.fine_cells);
+  EXPECT_EQ(soup.mesh.vertex_count(), 300u);
+  // Halving sums what a pass on the coarser grid sums: the quadrics add up to the indexed pass's.
+  Quadric soup_total, indexed_total;
+  for (const Quadric& q : soup.quadrics) soup_total += q;
+  for (const Quadric& q : indexed.quadrics) indexed_total += q;
+  EXPECT_NEAR(soup_total.a00, indexed_total.a00, 1e-7 * indexed_total.a00);
+  EXPECT_NEAR(soup_total.c, indexed_total.c, 1e-7 * indexed_total.c);
+}
+
 TEST(Cluster, AttributesAreAveragedPerCell) {
   IndexedMesh mesh = test::grid_square(40);
   mesh.colors.assign(mesh.positions.size(), {10, 200, 30, 255});
