@@ -11,8 +11,9 @@
 #        TMPDIR (where the mesh and the out-of-core files go; default /tmp),
 #        INPUT (an existing `ocsimp gen` PLY to use instead of generating one; it is kept)
 #
-# Disk: the input takes about 19 bytes a triangle; the LIMIT run adds about 54 bytes a triangle of unlinked
-# temporary files under TMPDIR (12 a vertex + 48 a triangle). The script checks `df` first and skips what
+# Disk: the input takes about 19 bytes a triangle; the LIMIT run adds about 46 bytes a triangle of unlinked
+# temporary files under TMPDIR (12 a vertex, 36 a triangle of corner positions, and the coded vertex ids:
+# 3-4 bytes a triangle on a generated scan, up to 15 on a scattered one). The script checks `df` first and skips what
 # does not fit. Everything it creates is removed on exit.
 set -euo pipefail
 
@@ -27,7 +28,7 @@ ocsimp="$BUILD/bin/ocsimp"
 tmp=${TMPDIR:-/tmp}
 free_bytes=$(($(df --output=avail -k "$tmp" | tail -1) * 1024))
 input_bytes=$((TRIANGLES * 19 + (1 << 20)))
-deref_bytes=$((TRIANGLES * 54))
+deref_bytes=$((TRIANGLES * 46))
 echo "mesh: $TRIANGLES triangles, about $((input_bytes >> 30)) GiB; free under $tmp: $((free_bytes >> 30)) GiB"
 if [[ -n ${INPUT:-} ]]; then
   input_bytes=0  # already on disk

@@ -27,6 +27,8 @@ constexpr std::uint64_t kVertexBytes = 12;
 constexpr std::uint64_t kMaxPartitions = 4096;
 constexpr std::size_t kBufferRecords = (1 << 20) / 12;
 constexpr std::size_t kMinBufferRecords = 4096 / 12;
+constexpr std::size_t kBufferBytes = 1 << 20;
+constexpr std::size_t kSpoolBlock = 1 << 20;  // vertices
 
 std::string temp_dir() {
   const char* dir = std::getenv("TMPDIR");
@@ -144,6 +146,90 @@ class RecordReader {
   std::size_t cursor_ = 0;
 };
 
+// The faces file holds each vertex id as the zigzag varint of its difference from the one before: a mesh's
+// faces mostly use vertices stored near each other, so an id takes one or two bytes instead of four (a
+// 10^9-triangle scan's faces: 12 GB as plain ids, about 5 GB coded). The file is read once per partition
+// and that disk space is what decides whether an input can be dereferenced at all.
+constexpr std::size_t kMaxCodedTriangle = 15;  // three 5-byte varints
+
+class FaceWriter {
+ public:
+  FaceWriter(const TempFile& file, std::size_t buffer_bytes)
+      : file_(&file), buffer_(std::max(buffer_bytes, 2 * kMaxCodedTriangle)) {}
+  void push(const Triangle& t) {
+    if (used_ + kMaxCodedTriangle > buffer_.size()) flush();
+    for (Index v : t) {
+      const auto delta = static_cast<std::uint32_t>(v - previous_);
+      previous_ = v;
+      // Zigzag: small differences of either sign become small numbers.
+      std::uint32_t z = (delta << 1) ^ static_cast<std::uint32_t>(-static_cast<std::int32_t>(delta >> 31));
+      while (z >= 0x80) {
+        buffer_[used_++] = static_cast<std::uint8_t>(z | 0x80);
+        z >>= 7;
+      }
+      buffer_[used_++] = static_cast<std::uint8_t>(z);
+    }
+  }
+  void flush() {
+    file_->write_at(bytes_, buffer_.data(), used_);
+    bytes_ += used_;
+    used_ = 0;
+  }
+  std::uint64_t bytes() const { return bytes_ + used_; }
+
+ private:
+  const TempFile* file_;
+  std::vector<std::uint8_t> buffer_;
+  std::size_t used_ = 0;
+  std::uint64_t bytes_ = 0;
+  Index previous_ = 0;
+};
+
+class FaceReader {
+ public:
+  FaceReader(const TempFile& file, std::uint64_t bytes, std::size_t buffer_bytes)
+      : file_(&file), left_(bytes), buffer_(std::max(buffer_bytes, 2 * kMaxCodedTriangle)) {}
+  Triangle next() {
+    if (end_ - cursor_ < kMaxCodedTriangle) refill();
+    Triangle t;
+    for (Index& v : t) {
+      std::uint32_t z = 0;
+      for (int shift = 0;; shift += 7) {
+        if (cursor_ == end_ || shift > 28) corrupt();
+        const std::uint8_t byte = buffer_[cursor_++];
+        z |= static_cast<std::uint32_t>(byte & 0x7F) << shift;
+        if (byte < 0x80) break;
+      }
+      previous_ += (z >> 1) ^ (0u - (z & 1u));
+      v = previous_;
+    }
+    return t;
+  }
+
+ private:
+  void refill() {
+    std::copy(buffer_.begin() + static_cast<std::ptrdiff_t>(cursor_),
+              buffer_.begin() + static_cast<std::ptrdiff_t>(end_), buffer_.begin());
+    end_ -= cursor_;
+    cursor_ = 0;
+    const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(left_, buffer_.size() - end_));
+    file_->read_at(offset_, buffer_.data() + end_, n);
+    offset_ += n;
+    left_ -= n;
+    end_ += n;
+  }
+  [[noreturn]] static void corrupt() {
+    throw Error(temp_dir(), {}, "out-of-core reading: a temporary file holds fewer records than written");
+  }
+
+  const TempFile* file_;
+  std::uint64_t offset_ = 0;
+  std::uint64_t left_;
+  std::vector<std::uint8_t> buffer_;
+  std::size_t cursor_ = 0, end_ = 0;
+  Index previous_ = 0;
+};
+
 // Where the reader's vertices go: memory while they fit the budget, a temporary file once they do not.
 class VertexSpool {
  public:
@@ -152,22 +238,49 @@ class VertexSpool {
 
   void add(const Vec3f* positions, std::size_t count) {
     count_ += count;
-    if (!file_ && memory_.size() + count <= capacity_) {
-      memory_.insert(memory_.end(), positions, positions + count);
+    if (!file_ && count_ <= capacity_) {
+      // In blocks, not one growing vector: its reallocation would hold the old and the new array at once,
+      // up to 1.5x the budget.
+      while (count > 0) {
+        if (blocks_.empty() || blocks_.back().size() == kSpoolBlock) {
+          blocks_.emplace_back();
+          blocks_.back().reserve(kSpoolBlock);
+        }
+        std::vector<Vec3f>& block = blocks_.back();
+        const std::size_t n = std::min(count, kSpoolBlock - block.size());
+        block.insert(block.end(), positions, positions + n);
+        positions += n;
+        count -= n;
+      }
       return;
     }
     if (!file_) {
       file_.emplace();
-      file_->write_at(0, memory_.data(), memory_.size() * sizeof(Vec3f));
-      writer_.emplace(*file_, memory_.size() * sizeof(Vec3f), kBufferRecords);
-      memory_ = {};
+      std::uint64_t offset = 0;
+      for (std::vector<Vec3f>& block : blocks_) {
+        file_->write_at(offset, block.data(), block.size() * sizeof(Vec3f));
+        offset += block.size() * sizeof(Vec3f);
+        block = {};
+      }
+      blocks_ = {};
+      writer_.emplace(*file_, offset, kBufferRecords);
     }
     for (std::size_t i = 0; i < count; ++i) writer_->push(positions[i]);
   }
 
+  // The vertices, when they fit: one array, built a block at a time so the copy never doubles them.
+  std::vector<Vec3f> take_memory() {
+    std::vector<Vec3f> all;
+    all.reserve(static_cast<std::size_t>(count_));
+    for (std::vector<Vec3f>& block : blocks_) {
+      all.insert(all.end(), block.begin(), block.end());
+      block = {};
+    }
+    blocks_ = {};
+    return all;
+  }
   bool spilled() const { return file_.has_value(); }
   std::uint64_t count() const { return count_; }
-  std::vector<Vec3f> take_memory() { return std::move(memory_); }
   // The file with every vertex, once the reader is done.
   const TempFile& file() {
     writer_->flush();
@@ -177,7 +290,7 @@ class VertexSpool {
  private:
   std::uint64_t capacity_;
   std::uint64_t count_ = 0;
-  std::vector<Vec3f> memory_;
+  std::vector<std::vector<Vec3f>> blocks_;
   std::optional<TempFile> file_;
   std::optional<RecordWriter<Vec3f>> writer_;
 };
@@ -217,7 +330,7 @@ class DereferencedStream final : public TriangleStream {
     batch.clear();
     if (emitted_ == triangles_) return false;
     if (!face_reader_) {
-      face_reader_.emplace(*faces_file_, 0, triangles_, kBufferRecords);
+      face_reader_.emplace(*faces_file_, face_bytes_, kBufferBytes);
       // Every partition's region is read at once: their buffers share the budget.
       const std::size_t buffer = static_cast<std::size_t>(std::clamp<std::uint64_t>(
           budget_ / kVertexBytes / (partitions_ + 1), kMinBufferRecords, kBufferRecords));
@@ -257,7 +370,7 @@ class DereferencedStream final : public TriangleStream {
         {budget_ / kVertexBytes, (vertex_count_ + kMaxPartitions - 1) / kMaxPartitions, std::uint64_t{1}});
     partitions_ = static_cast<std::size_t>((vertex_count_ + part_size_ - 1) / part_size_);
     corner_counts_.assign(partitions_, 0);
-    RecordWriter<Triangle> writer(*faces_file_, 0, kBufferRecords);
+    FaceWriter writer(*faces_file_, kBufferBytes);
     TriangleBatch batch;
     while (inner_->next(batch)) {
       for (const Triangle& t : batch.triangles) {
@@ -275,6 +388,7 @@ class DereferencedStream final : public TriangleStream {
       triangles_ += batch.triangles.size();
     }
     writer.flush();
+    face_bytes_ = writer.bytes();
   }
 
   // Each partition's vertices in memory, one scan of the index file, its corners' positions to its region.
@@ -289,7 +403,7 @@ class DereferencedStream final : public TriangleStream {
       const std::uint64_t size = std::min(part_size_, vertex_count_ - first);
       part.resize(static_cast<std::size_t>(size));
       vertex_file.read_at(first * sizeof(Vec3f), part.data(), part.size() * sizeof(Vec3f));
-      RecordReader<Triangle> faces(*faces_file_, 0, triangles_, kBufferRecords);
+      FaceReader faces(*faces_file_, face_bytes_, kBufferBytes);
       RecordWriter<Vec3f> corners(*corners_file_, region_offset_[p], kBufferRecords);
       for (std::uint64_t f = 0; f < triangles_; ++f) {
         for (Index v : faces.next()) {
@@ -313,7 +427,8 @@ class DereferencedStream final : public TriangleStream {
   std::uint64_t vertex_count_ = 0;
   std::uint64_t bytes_total_ = 0;
 
-  std::optional<TempFile> faces_file_;    // the faces' vertex ids, 12 bytes a triangle
+  std::optional<TempFile> faces_file_;  // the faces' vertex ids, coded (FaceWriter)
+  std::uint64_t face_bytes_ = 0;
   std::optional<TempFile> corners_file_;  // corner positions, grouped by the partition of their vertex
   std::uint64_t triangles_ = 0;
   std::uint64_t part_size_ = 1;
@@ -321,7 +436,7 @@ class DereferencedStream final : public TriangleStream {
   std::vector<std::uint64_t> corner_counts_;
   std::vector<std::uint64_t> region_offset_;
 
-  std::optional<RecordReader<Triangle>> face_reader_;
+  std::optional<FaceReader> face_reader_;
   std::vector<RecordReader<Vec3f>> corner_readers_;
   std::uint64_t emitted_ = 0;
 };
