@@ -105,6 +105,27 @@ void store_attributes(const FineCells& cells, const Attributes& a, double points
   if (!cells.uv_sum.empty()) mesh.uvs[out] = (a.uv / divide).cast<float>();
 }
 
+// The weight to hand border_quadric() for the border planes the output quadrics carry. It weighs a border
+// crossing at w * cell^2; a border runs through a cell in about two crossings of one direction class, so
+// its weight per unit length is about 4 w cell, which should be carried_border_weight times the mean edge
+// length h, as a decimator's border edges would weigh.
+double carried_border_scale(const FineCells& cells, const ClusterOptions& options) {
+  // Each triangle adds its area-weighted plane to the cells of its three corners: the traces sum 3x the area.
+  double trace = 0;
+  for (const Quadric& q : cells.quadrics) trace += q.a00 + q.a11 + q.a22;
+  const double triangles = static_cast<double>(std::max<std::uint64_t>(cells.input_triangles, 1));
+  const double mean_area = trace / 3.0 / triangles;
+  // The edge of an equilateral triangle of that area.
+  const double h = std::sqrt(4.0 * mean_area / std::sqrt(3.0));
+  const double scale = options.carried_border_weight * h / (4.0 * cells.grid.cell);
+  return std::isfinite(scale) ? scale : 0.0;
+}
+
+Quadric carried_border(const FineCells& cells, std::size_t i, double weight) {
+  if (!cells.has_border() || !(weight > 0.0)) return Quadric();
+  return border_quadric(cells.border[i], cells.grid, cells.keys[i], cells.quadrics[i], weight);
+}
+
 // Builds the output: one vertex per cluster, the clusters' triangles, and the surface quadrics.
 QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const ClusterOptions& options,
                      ClusterStats& stats) {
@@ -119,6 +140,7 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
 
   std::vector<Triangle> triangles;
   report(options.progress, "cluster: place", 0, clusters);
+  const double carried_weight = options.border_in_quadrics ? carried_border_scale(cells, options) : 0.0;
   if (!clustering) {
     // Every fine cell is an output vertex.
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
@@ -127,7 +149,7 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
       Attributes a;
       write_attributes(cells, i, a);
       store_attributes(cells, a, sums.points, i, mesh);
-      if (options.border_in_quadrics) cells.quadrics[i] = sums.quadric;
+      if (options.border_in_quadrics) cells.quadrics[i] += carried_border(cells, i, carried_weight);
     });
     out.quadrics = std::move(cells.quadrics);
     triangles.reserve(cells.triangles.size());
@@ -151,7 +173,8 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
         const std::uint32_t i = member[k];
         const PlacementSums cell = cell_placement_sums(cells, i, options.boundary_weight);
         sums.add(cell);
-        surface += options.border_in_quadrics ? cell.quadric : cells.quadrics[i];
+        surface += cells.quadrics[i];
+        if (options.border_in_quadrics) surface += carried_border(cells, i, carried_weight);
         write_attributes(cells, i, a);
       }
       mesh.positions[c] = place(sums, options.representative).point.cast<float>();
@@ -262,7 +285,8 @@ QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options, Clust
   if (!(options.fine_cells_per_target >= 1.0) || !std::isfinite(options.fine_cells_per_target)) {
     throw Error("fine_cells_per_target must be at least 1");
   }
-  if (!(options.boundary_weight >= 0.0) || !std::isfinite(options.boundary_weight)) {
+  if (!(options.boundary_weight >= 0.0) || !std::isfinite(options.boundary_weight) ||
+      !(options.carried_border_weight >= 0.0) || !std::isfinite(options.carried_border_weight)) {
     throw Error("the boundary weight must be a non-negative number");
   }
   const unsigned threads = options.threads > 0

@@ -20,7 +20,17 @@ constexpr double kInCoreBytesPerFace = 160.0;
 // Peak bytes per occupied fine cell of the octree clustering, cells and merge state together: 3.8 GiB over
 // the vertex array for 12 M fine cells on the 10^9-triangle scan (bench/simplify_large.sh), rounded up.
 constexpr double kClusterBytesPerCell = 340.0;
+// The same for a triangle soup (an out-of-core dereferenced input, STL): its pass keys the cells by their
+// coordinates, keeps their first-seen order and sorts them at the end, 540-750 bytes a fine cell with the
+// merge (`ocsimp cluster` of a 10 M soup, octree to 0.2-1 M faces); and since it cannot count its cells
+// before the pass, it holds up to twice the targeted number before halving its grid.
+constexpr double kSoupClusterBytesPerCell = 2 * 760.0;
 constexpr double kMaxIntermediate = 8.0;
+// However small the target, an intermediate the decimator takes in a fraction of a second (about 0.2 s for
+// 2^18 faces) is not worth making coarser: clustering to a few hundred faces loses what decimation keeps.
+// Measured with --two-stage through 8x the target: fandisk to 129 faces, RMS 2.2x pure decimation's (its
+// creases do not survive a 1,000-face octree); homer and rocker-arm to 0.1 %, 1.2x.
+constexpr double kMinIntermediate = 1 << 18;
 // The octree merge costs several times a decimator collapse (a 10 M scan clustered to 800 k faces: 2.8 M
 // merges, 28 s), and its adaptivity buys little once the decimator is to take the intermediate much further:
 // the pipeline caps the fine grid near this many cells (the grid's level then holds at most twice as many),
@@ -112,7 +122,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // The largest intermediate whose fine cells fit beside the vertex array: fine_cells_for is the full
   // per-vertex count below the cap, flat at the cap, then the minimum per-vertex count, so its inverse is
   // room / full below the cap and room / minimum from it on (vertices; twice that in faces).
-  const double cell_room = std::max(0.0, budget - vertex_bytes) / kClusterBytesPerCell;
+  const double cell_room = std::max(0.0, budget - vertex_bytes) /
+                           (stream->indexed() ? kClusterBytesPerCell : kSoupClusterBytesPerCell);
   const double cluster_room =
       2.0 * cell_room /
       (cell_room < kMaxFineCells ? fine_per_vertex : std::min(kMinFinePerVertex, fine_per_vertex));
@@ -124,7 +135,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
         options.intermediate > 0
             ? options.intermediate
             : std::clamp(std::floor(room / static_cast<double>(target)), 1.0, kMaxIntermediate);
-    intermediate_faces = static_cast<std::uint64_t>(multiple * static_cast<double>(target));
+    double faces = multiple * static_cast<double>(target);
+    if (options.intermediate == 0) faces = std::max(faces, std::min(kMinIntermediate, room));
+    intermediate_faces = static_cast<std::uint64_t>(faces);
   } else {
     intermediate_faces = static_cast<std::uint64_t>(std::max(room, 1000.0));
   }
@@ -135,6 +148,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // The original's border planes ride in the quadrics; the decimator's own would see the clustered mesh's
   // spurious borders and folds (see borders_carried).
   cluster_options.border_in_quadrics = cluster_options.preserve_boundary;
+  cluster_options.carried_border_weight = options.decimate.boundary_weight;
   cluster_options.target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
   cluster_options.fine_cells_per_target =
       fine_cells_for(static_cast<double>(cluster_options.target_faces), fine_per_vertex) /
