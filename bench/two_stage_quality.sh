@@ -2,11 +2,11 @@
 # Two-stage simplification (cluster, then decimate with the cluster quadrics carried) against pure
 # decimation at the same face count: two-sided RMS distance to the original (`ocsimp compare --json`) and
 # CPU time (user + system), as ratios two-stage / pure. Meshes: a generated scan (GENERATED triangles,
-# default 10^7) and bunny, horse and igea from ../shared/data; face counts 1% and 0.1% of the input.
+# default 10^7) and the meshes of ../shared/data; face counts 1% and 0.1% of the input.
 #
 #   bench/two_stage_quality.sh [BUILD_DIR]      (default: build)
 #   env: GENERATED (default 10000000; 0 to skip), RATIOS (default "0.01 0.001"), SAMPLES (compare samples,
-#        default 1000000), MESHES (default "bunny horse igea"; "" for none), DATA (default ../shared/data)
+#        default 1000000), MESHES (default: all eight shared meshes; "" for none), DATA (default ../shared/data)
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -15,7 +15,7 @@ DATA=${DATA:-$ROOT/../shared/data}
 GENERATED=${GENERATED:-10000000}
 RATIOS=${RATIOS:-0.01 0.001}
 SAMPLES=${SAMPLES:-1000000}
-MESHES=${MESHES-bunny horse igea}
+MESHES=${MESHES-bunny horse igea fandisk rocker-arm spot homer teapot}
 ocsimp="$BUILD/bin/ocsimp"
 [[ -x $ocsimp ]] || { echo "no $ocsimp: build the ocsimp target first" >&2; exit 1; }
 work=$(mktemp -d "${TMPDIR:-/tmp}/ocsimp-two-stage.XXXXXX")
