@@ -324,10 +324,10 @@ struct Decimator {
         x.p[1] = m.positions[v].y();
         x.p[2] = m.positions[v].z();
         x.flags = 0;
-        x.seg_count = 0;
         x.seg_next = static_cast<Index>(v);
         x.stamp = 0;
         x.mark = 0;
+        x.q = Quadric{};
       }
     });
     std::vector<Vec3f>().swap(m.positions);
@@ -346,17 +346,22 @@ struct Decimator {
       }
     });
     std::vector<Triangle>().swap(m.triangles);
-    for (const Face& f : faces) {
-      for (Index v : f.v) ++verts[v].seg_count;
-    }
 
-    // Vertex -> faces in CSR form, each list in face order.
+    // Vertex -> faces in CSR form, each list in face order. Counts and fill cursors live in a dense array
+    // rather than in the 128-byte vertex records, which these two passes over the faces would otherwise
+    // visit three times each.
+    std::vector<Index> cursor(nv, 0);
+    for (const Face& f : faces) {
+      for (Index v : f.v) ++cursor[v];
+    }
     Box3 box;
     {
       Index running = 0;
       for (std::size_t v = 0; v < nv; ++v) {
         Vertex& x = verts[v];
+        x.seg_count = cursor[v];
         x.seg_start = running;
+        cursor[v] = running;
         running += x.seg_count;
         x.live_faces = x.seg_count;
         x.seg_cap = x.seg_count;
@@ -364,14 +369,14 @@ struct Decimator {
           box.add(Vec3f(x.p[0], x.p[1], x.p[2]));
           ++verts_alive;
         }
-        x.mark = x.seg_start;  // fill cursor
       }
     }
     stats.input_vertices = verts_alive;
     vf.resize(3 * nf);
     for (std::size_t f = 0; f < nf; ++f) {
-      for (Index v : faces[f].v) vf[verts[v].mark++] = static_cast<Index>(f);
+      for (Index v : faces[f].v) vf[cursor[v]++] = static_cast<Index>(f);
     }
+    std::vector<Index>().swap(cursor);
 
     origin = box.center();
     const double diagonal = box.diagonal();
@@ -488,6 +493,68 @@ struct Decimator {
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
   }
 
+  // Sums the area-weighted plane quadric of every face into its corners. Each face's plane is computed once
+  // (a vertex-by-vertex pass computes it at each of the three corners), in parallel over a block of faces;
+  // the sums are then added up in face order, so each vertex adds its faces in the order of its face list,
+  // whatever the thread count.
+  void face_quadrics() {
+    const std::size_t nf = faces.size();
+    constexpr std::size_t block = 16384, grain = 1024;
+    struct Term {
+      double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
+    };
+    std::vector<Term> terms(std::min(nf, block));
+    const bool area = opt.area_weighting;
+    // Two vertex ranges per core: every task scans the whole block, so more would only repeat that scan.
+    const std::size_t nv = verts.size();
+    const std::size_t ranges = 2 * std::max(1, tbb::this_task_arena::max_concurrency());
+    const std::size_t owned = std::max<std::size_t>(1, (nv + ranges - 1) / ranges);
+    for (std::size_t first = 0; first < nf; first += block) {
+      const std::size_t count = std::min(block, nf - first);
+      parallel_chunks(count, grain, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) {
+          const Face& f = faces[first + i];
+          const Vec3d p0 = rel(f.v[0]);
+          const Vec3d n = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
+          const double length2 = n.squaredNorm();
+          Term& t = terms[i];
+          if (!(length2 > 0)) {
+            t.c = -1;  // marks a degenerate face: it adds nothing (a real c is a square, never negative)
+            continue;
+          }
+          // The plane of unit normal n / |n| weighted by the area |n| / 2 (or by 1), written on the
+          // unnormalized n: one square root and one division per face.
+          const double w = area ? 0.5 / std::sqrt(length2) : 1.0 / length2;
+          const double d = -n.dot(p0);
+          const double wx = w * n.x(), wy = w * n.y(), wz = w * n.z();
+          t = {wx * n.x(), wx * n.y(), wx * n.z(), wy * n.y(), wy * n.z(),
+               wz * n.z(), wx * d,     wy * d,     wz * d,     w * d * d};
+        }
+      });
+      // Each task owns a range of vertices and adds only to those, so no two write the same record.
+      parallel_chunks(nv, owned, [&](std::size_t low, std::size_t high) {
+        for (std::size_t i = 0; i < count; ++i) {
+          const Term& t = terms[i];
+          if (t.c < 0) continue;
+          for (Index v : faces[first + i].v) {
+            if (v < low || v >= high) continue;
+            Quadric& q = verts[v].q;
+            q.a00 += t.a00;
+            q.a01 += t.a01;
+            q.a02 += t.a02;
+            q.a11 += t.a11;
+            q.a12 += t.a12;
+            q.a22 += t.a22;
+            q.b0 += t.b0;
+            q.b1 += t.b1;
+            q.b2 += t.b2;
+            q.c += t.c;
+          }
+        }
+      });
+    }
+  }
+
   void build_quadrics(std::vector<Quadric>& carried) {
     const std::size_t nv = verts.size();
     if (!carried.empty()) {
@@ -506,36 +573,7 @@ struct Decimator {
       });
       std::vector<Quadric>().swap(carried);
     } else {
-      const bool area = opt.area_weighting;
-      parallel_chunks(nv, 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t v = begin; v < end; ++v) {
-          Quadric sum;
-          const Vertex& x = verts[v];
-          for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
-            const Face& f = faces[vf[i]];
-            const Vec3d p0 = rel(f.v[0]);
-            const Vec3d n = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
-            const double length2 = n.squaredNorm();
-            if (!(length2 > 0)) continue;
-            // The plane of unit normal n / |n| weighted by the area |n| / 2 (or by 1), written on the
-            // unnormalized n: one square root and one division per face.
-            const double w = area ? 0.5 / std::sqrt(length2) : 1.0 / length2;
-            const double d = -n.dot(p0);
-            const double wx = w * n.x(), wy = w * n.y(), wz = w * n.z();
-            sum.a00 += wx * n.x();
-            sum.a01 += wx * n.y();
-            sum.a02 += wx * n.z();
-            sum.a11 += wy * n.y();
-            sum.a12 += wy * n.z();
-            sum.a22 += wz * n.z();
-            sum.b0 += wx * d;
-            sum.b1 += wy * d;
-            sum.b2 += wz * d;
-            sum.c += w * d * d;
-          }
-          verts[v].q = sum;
-        }
-      });
+      face_quadrics();
     }
     std::sort(boundary_list.begin(), boundary_list.end());
     if (opt.lock_boundary) {
@@ -988,23 +1026,26 @@ struct Decimator {
   // 1.5 times as much on a 1 M-triangle scan, as each touches cache lines and pages that hold mostly dead
   // records. Renumbering the live vertices, faces and edges to the front, in index order (so the output
   // order is unchanged), and rebuilding the face lists as one segment per vertex, packs them together. Done
-  // in place (no memory added) each time half the vertices of the last renumbering remain: about 6 % less
-  // CPU time on 1 M and 10 M-triangle scans decimated to 1 % (against a quarter: about 3 %); the heap keeps
-  // its order, so the output is byte-identical. Not with virtual pairs (their per-vertex lists would need
-  // renumbering too).
+  // in place (plus 4 bytes per live vertex, for the new ids) each time half the vertices of the last
+  // renumbering remain: about 6 % less CPU time on 1 M and 10 M-triangle scans decimated to 1 % (against a
+  // quarter: about 3 %); the heap keeps its order, so the output is byte-identical. Not with virtual pairs
+  // (their per-vertex lists would need renumbering too).
   void compact() {
     const std::size_t nv = verts.size(), nf = faces.size(), ne = edges.size();
+    // New vertex ids in a dense array rather than in the vertex records: the edge and face passes look up
+    // both ends of every edge and all corners of every face, and with one 128-byte record per lookup those
+    // reads were about two thirds of this function's time. New edge ids go in `vf` (rebuilt below; it has
+    // room, as every edge was found in a face).
+    std::vector<Index> id(nv);
+    Index nv_new = 0;
+    for (std::size_t v = 0; v < nv; ++v) id[v] = verts[v].live_faces > 0 ? nv_new++ : kNone;
     // An edge lives only while a face holds both its ends; be safe anyway about ends left without faces.
     for (std::size_t e = 0; e < ne; ++e) {
       const Edge& edge = edges[e];
-      if (edge.slot != kDead && (verts[edge.v[0]].live_faces == 0 || verts[edge.v[1]].live_faces == 0))
+      if (edge.slot != kDead && (id[edge.v[0]] == kNone || id[edge.v[1]] == kNone))
         kill(static_cast<Index>(e));
     }
-    // New vertex ids in `mark` (scratch), new edge ids in `vf` (rebuilt below; it has room, as every edge
-    // was found in a face).
     if (vf.size() < ne) vf.resize(ne);
-    Index nv_new = 0;
-    for (std::size_t v = 0; v < nv; ++v) verts[v].mark = verts[v].live_faces > 0 ? nv_new++ : kNone;
     Index ne_new = 0;
     for (std::size_t e = 0; e < ne; ++e) {
       const Edge edge = edges[e];
@@ -1013,7 +1054,7 @@ struct Decimator {
         continue;
       }
       vf[e] = ne_new;
-      edges[ne_new] = {{verts[edge.v[0]].mark, verts[edge.v[1]].mark}, edge.slot};
+      edges[ne_new] = {{id[edge.v[0]], id[edge.v[1]]}, edge.slot};
       if (edge.slot < first_state) heap.rename(edge.slot, ne_new);
       ++ne_new;
     }
@@ -1028,17 +1069,15 @@ struct Decimator {
     for (std::size_t f = 0; f < nf; ++f) {
       const Face& t = faces[f];
       if (t.v[0] == kNone) continue;
-      faces[nf_new++] = {{verts[t.v[0]].mark, verts[t.v[1]].mark, verts[t.v[2]].mark},
-                         {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
-                         {t.ref[0], t.ref[1]}};
+      faces[nf_new++] = {
+          {id[t.v[0]], id[t.v[1]], id[t.v[2]]}, {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]}, {t.ref[0], t.ref[1]}};
     }
     for (std::size_t v = 0; v < nv; ++v) {
-      const Index to = verts[v].mark;
+      const Index to = id[v];
       if (to == kNone) continue;
       verts[to] = verts[v];
       Vertex& x = verts[to];
       x.stamp = 0;
-      x.seg_count = 0;
       x.seg_next = to;
       if (!normals.empty()) normals[to] = normals[v];
       if (!colors.empty()) colors[to] = colors[v];
@@ -1052,19 +1091,23 @@ struct Decimator {
     if (!colors.empty()) colors.resize(nv_new);
     if (!uvs.empty()) uvs.resize(nv_new);
 
+    // The face lists, counted and filled through `id` (now indexed by new vertex id) for the same reason.
+    std::fill(id.begin(), id.begin() + nv_new, Index{0});
     for (const Face& f : faces) {
-      for (Index v : f.v) ++verts[v].seg_count;
+      for (Index v : f.v) ++id[v];
     }
     Index running = 0;
-    for (Vertex& x : verts) {
+    for (Index v = 0; v < nv_new; ++v) {
+      Vertex& x = verts[v];
       x.seg_start = running;
-      x.seg_cap = x.seg_count;
-      x.mark = running;  // fill cursor
+      x.seg_count = id[v];
+      x.seg_cap = id[v];
+      id[v] = running;  // fill cursor
       running += x.seg_count;
     }
     vf.resize(running);
     for (std::size_t f = 0; f < faces.size(); ++f) {
-      for (Index v : faces[f].v) vf[verts[v].mark++] = static_cast<Index>(f);
+      for (Index v : faces[f].v) vf[id[v]++] = static_cast<Index>(f);
     }
   }
 
