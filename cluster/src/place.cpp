@@ -40,13 +40,15 @@ double largest_eigenvalue(const Eigen::Matrix3d& a) {
   return solver.eigenvalues().cwiseAbs().maxCoeff();
 }
 
-bool outside_by_more_than_its_size(const Vec3d& p, const Box3& box) {
-  const Vec3d size = box.extent();
+bool inside(const Vec3d& p, const Box3& box) {
   for (int a = 0; a < 3; ++a) {
-    if (p[a] < box.lo[a] - size[a] || p[a] > box.hi[a] + size[a]) return true;
+    if (!(p[a] >= box.lo[a] && p[a] <= box.hi[a])) return false;
   }
-  return false;
+  return true;
 }
+
+// Triangles around a vertex of a closed mesh, on average (Euler: E = 3V, F = 2V).
+constexpr double kCornersPerVertex = 6.0;
 
 }  // namespace
 
@@ -61,7 +63,7 @@ Vec3d minimize_damped(const Quadric& q, const Vec3d& origin) {
 }
 
 Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, const Quadric& surface,
-                       double weight) {
+                       double weight, double tangent_power) {
   Quadric q;
   // The cell's dominant surface normal. What interior edges leave behind is exactly along their two
   // triangles' mean normal (for unit normals n1, n2 both perpendicular to the edge e, e x (n1 - n2) is
@@ -82,7 +84,9 @@ Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, 
     // left: one border crossing leaves 1, the cancellation of interior edges ~1e-6 of float residue. No
     // threshold, so nothing flips when sums are taken in another order.
     const double d = grid.cell * s[3] / length - n.dot(origin);
-    q += Quadric::plane(n, d, weight * along_surface * grid.cell * grid.cell);
+    const double tangent =
+        tangent_power > 0 ? std::pow(along_surface / (length * length), tangent_power) : 1.0;
+    q += Quadric::plane(n, d, weight * along_surface * tangent * grid.cell * grid.cell);
   }
   return q;
 }
@@ -95,6 +99,10 @@ PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, doub
     s.quadric += border_quadric(cells.border[cell], cells.grid, key, cells.quadrics[cell], boundary_weight);
   }
   s.points = cells.points[cell];
+  const Quadric& surface = cells.quadrics[cell];
+  s.corner_area = surface.a00 + surface.a11 + surface.a22;
+  // Soups count corners as points; an indexed input counts vertices, each the corner of about six triangles.
+  s.corners = cells.input_vertices > 0 ? kCornersPerVertex * s.points : s.points;
   s.point_sum =
       s.points * cells.grid.cell_origin(key) + cells.grid.cell * cells.point_sum[cell].cast<double>();
   s.box = cells.grid.cell_box(key);
@@ -141,18 +149,30 @@ Vec3d minimize_in_box(const Quadric& q, const Box3& box, const Vec3d& start) {
   return best;
 }
 
+Box3 quadric_reach(const PlacementSums& sums) {
+  Box3 reach = sums.box;
+  const Vec3d size = sums.box.extent();
+  const double edge = sums.edge_length();
+  for (int a = 0; a < 3; ++a) {
+    const double margin = std::min(edge, size[a]);
+    reach.lo[a] -= margin;
+    reach.hi[a] += margin;
+  }
+  return reach;
+}
+
 Placement place(const PlacementSums& sums, Representative representative) {
   const Vec3d mean = sums.mean();
   Vec3d point = mean;
   switch (representative) {
     case Representative::mean:
       break;
-    case Representative::quadric:
+    case Representative::quadric: {
       point = minimize_damped(sums.quadric, mean);
-      if (!point.allFinite() || outside_by_more_than_its_size(point, sums.box)) {
-        point = minimize_in_box(sums.quadric, sums.box, mean);
-      }
+      const Box3 reach = quadric_reach(sums);
+      if (!point.allFinite() || !inside(point, reach)) point = minimize_in_box(sums.quadric, reach, mean);
       break;
+    }
     case Representative::constrained:
       point = minimize_in_box(sums.quadric, sums.box, mean);
       break;

@@ -1,6 +1,8 @@
 // Where a cluster of cells puts its vertex, and what that costs.
 #pragma once
 
+#include <cmath>
+
 #include "cells.h"
 #include "ocsimp/cluster/cluster.h"
 #include "ocsimp/core/quadric.h"
@@ -13,24 +15,42 @@ struct PlacementSums {
   Vec3d point_sum = Vec3d::Zero();
   double points = 0;
   Box3 box;  // union of the cells' boxes
+  // The surface quadric's trace: the area of each triangle touching the cluster, once per corner in it; and
+  // how many corners that is. Their ratio is the mean area of those triangles.
+  double corner_area = 0;
+  double corners = 0;
 
   void add(const PlacementSums& o) {
     quadric += o.quadric;
     point_sum += o.point_sum;
     points += o.points;
     box.add(o.box);
+    corner_area += o.corner_area;
+    corners += o.corners;
   }
   Vec3d mean() const { return points > 0 ? Vec3d(point_sum / points) : box.center(); }
+  // The edge of an equilateral triangle of the mean area: how far past the cluster's cells the triangles
+  // whose planes make up its quadric reach.
+  double edge_length() const {
+    return corners > 0 ? std::sqrt(4.0 / std::sqrt(3.0) * corner_area / corners) : 0;
+  }
 };
 
 // The border planes of a cell as a quadric: each direction slot whose planes did not cancel becomes the
 // plane of their summed normal and offset, weighted by `weight` x cell_size^2 x the squared length of that
 // normal's component along the surface (`surface`: the cell's quadric, whose dominant eigenvector is taken
-// as the surface normal).
+// as the surface normal). With `tangent_power` p > 0 the weight also takes the p-th power of the fraction of
+// the normal that lies along the surface: 1 for a border, near 0 for what a crease leaves (see cluster.cpp).
 Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, const Quadric& surface,
-                       double weight);
+                       double weight, double tangent_power = 0);
 
 PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, double boundary_weight);
+
+// Where the quadric representative may go: the cluster's box grown on each side by the edge length of its
+// triangles (at most the box's own size on that axis). The quadric sums the planes of triangles with a corner
+// in the cluster, so it describes the surface no farther than that; beyond, its minimizer is an
+// extrapolation of nearly parallel planes.
+Box3 quadric_reach(const PlacementSums& sums);
 
 struct Placement {
   Vec3d point;
