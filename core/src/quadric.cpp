@@ -28,20 +28,6 @@ Quadric Quadric::triangle(const Vec3d& p0, const Vec3d& p1, const Vec3d& p2) {
   return plane(n, -n.dot(p0), 0.5 * length);
 }
 
-Quadric& Quadric::operator+=(const Quadric& q) {
-  a00 += q.a00;
-  a01 += q.a01;
-  a02 += q.a02;
-  a11 += q.a11;
-  a12 += q.a12;
-  a22 += q.a22;
-  b0 += q.b0;
-  b1 += q.b1;
-  b2 += q.b2;
-  c += q.c;
-  return *this;
-}
-
 Quadric& Quadric::operator*=(double s) {
   a00 *= s;
   a01 *= s;

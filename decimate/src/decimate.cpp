@@ -347,36 +347,18 @@ struct Decimator {
     });
     std::vector<Triangle>().swap(m.triangles);
 
-    // Vertex -> faces in CSR form, each list in face order. Counts and fill cursors live in a dense array
-    // rather than in the 128-byte vertex records, which these two passes over the faces would otherwise
-    // visit three times each.
-    std::vector<Index> cursor(nv, 0);
-    for (const Face& f : faces) {
-      for (Index v : f.v) ++cursor[v];
-    }
     Box3 box;
     {
-      Index running = 0;
-      for (std::size_t v = 0; v < nv; ++v) {
-        Vertex& x = verts[v];
-        x.seg_count = cursor[v];
-        x.seg_start = running;
-        cursor[v] = running;
-        running += x.seg_count;
+      std::vector<Index> scratch(nv);
+      build_face_lists(scratch, nv, [&](Vertex& x) {
         x.live_faces = x.seg_count;
-        x.seg_cap = x.seg_count;
         if (x.seg_count > 0) {
           box.add(Vec3f(x.p[0], x.p[1], x.p[2]));
           ++verts_alive;
         }
-      }
+      });
     }
     stats.input_vertices = verts_alive;
-    vf.resize(3 * nf);
-    for (std::size_t f = 0; f < nf; ++f) {
-      for (Index v : faces[f].v) vf[cursor[v]++] = static_cast<Index>(f);
-    }
-    std::vector<Index>().swap(cursor);
 
     origin = box.center();
     const double diagonal = box.diagonal();
@@ -500,10 +482,7 @@ struct Decimator {
   void face_quadrics() {
     const std::size_t nf = faces.size();
     constexpr std::size_t block = 16384, grain = 1024;
-    struct Term {
-      double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
-    };
-    std::vector<Term> terms(std::min(nf, block));
+    std::vector<Quadric> terms(std::min(nf, block));
     const bool area = opt.area_weighting;
     // Two vertex ranges per core: every task scans the whole block, so more would only repeat that scan.
     const std::size_t nv = verts.size();
@@ -517,7 +496,7 @@ struct Decimator {
           const Vec3d p0 = rel(f.v[0]);
           const Vec3d n = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
           const double length2 = n.squaredNorm();
-          Term& t = terms[i];
+          Quadric& t = terms[i];
           if (!(length2 > 0)) {
             t.c = -1;  // marks a degenerate face: it adds nothing (a real c is a square, never negative)
             continue;
@@ -534,21 +513,10 @@ struct Decimator {
       // Each task owns a range of vertices and adds only to those, so no two write the same record.
       parallel_chunks(nv, owned, [&](std::size_t low, std::size_t high) {
         for (std::size_t i = 0; i < count; ++i) {
-          const Term& t = terms[i];
+          const Quadric& t = terms[i];
           if (t.c < 0) continue;
           for (Index v : faces[first + i].v) {
-            if (v < low || v >= high) continue;
-            Quadric& q = verts[v].q;
-            q.a00 += t.a00;
-            q.a01 += t.a01;
-            q.a02 += t.a02;
-            q.a11 += t.a11;
-            q.a12 += t.a12;
-            q.a22 += t.a22;
-            q.b0 += t.b0;
-            q.b1 += t.b1;
-            q.b2 += t.b2;
-            q.c += t.c;
+            if (v >= low && v < high) verts[v].q += t;
           }
         }
       });
@@ -1091,23 +1059,32 @@ struct Decimator {
     if (!colors.empty()) colors.resize(nv_new);
     if (!uvs.empty()) uvs.resize(nv_new);
 
-    // The face lists, counted and filled through `id` (now indexed by new vertex id) for the same reason.
-    std::fill(id.begin(), id.begin() + nv_new, Index{0});
+    build_face_lists(id, nv_new, [](Vertex&) {});
+  }
+
+  // Vertex -> faces in CSR form, each vertex's list one segment in face order. Counts and fill cursors go
+  // through `scratch` (one entry per vertex, overwritten) rather than through the 128-byte vertex records,
+  // which the two passes over the faces would otherwise visit three times each. `each` sees every vertex
+  // once its segment is set.
+  template <class Each>
+  void build_face_lists(std::vector<Index>& scratch, std::size_t nv, Each&& each) {
+    std::fill(scratch.begin(), scratch.begin() + static_cast<std::ptrdiff_t>(nv), Index{0});
     for (const Face& f : faces) {
-      for (Index v : f.v) ++id[v];
+      for (Index v : f.v) ++scratch[v];
     }
     Index running = 0;
-    for (Index v = 0; v < nv_new; ++v) {
+    for (std::size_t v = 0; v < nv; ++v) {
       Vertex& x = verts[v];
       x.seg_start = running;
-      x.seg_count = id[v];
-      x.seg_cap = id[v];
-      id[v] = running;  // fill cursor
+      x.seg_count = scratch[v];
+      x.seg_cap = scratch[v];
+      scratch[v] = running;  // fill cursor
       running += x.seg_count;
+      each(x);
     }
     vf.resize(running);
     for (std::size_t f = 0; f < faces.size(); ++f) {
-      for (Index v : faces[f].v) vf[id[v]++] = static_cast<Index>(f);
+      for (Index v : faces[f].v) vf[scratch[v]++] = static_cast<Index>(f);
     }
   }
 

@@ -17,7 +17,20 @@ struct Quadric {
   // The plane of a triangle weighted by its area; zero for a degenerate triangle.
   static Quadric triangle(const Vec3d& p0, const Vec3d& p1, const Vec3d& p2);
 
-  Quadric& operator+=(const Quadric& q);
+  // Inline: the cluster pass and the decimator's setup add one per triangle corner.
+  Quadric& operator+=(const Quadric& q) {
+    a00 += q.a00;
+    a01 += q.a01;
+    a02 += q.a02;
+    a11 += q.a11;
+    a12 += q.a12;
+    a22 += q.a22;
+    b0 += q.b0;
+    b1 += q.b1;
+    b2 += q.b2;
+    c += q.c;
+    return *this;
+  }
   Quadric operator+(const Quadric& q) const {
     Quadric r = *this;
     r += q;
