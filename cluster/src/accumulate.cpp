@@ -948,44 +948,61 @@ struct SoupChunk {
   }
 };
 
+// A soup pass's cells, numbered in order of first appearance, chunk by chunk: the numbering, like the sums,
+// follows the input alone.
+struct SoupCells {
+  CellMap map;
+  std::vector<CellKey> keys;
+  CellStore store;
+
+  std::uint32_t number(CellKey key) {
+    bool inserted;
+    const std::uint32_t i = map.insert(key, static_cast<std::uint32_t>(keys.size()), inserted);
+    if (inserted) {
+      check_cell_count(keys.size() + 1);
+      keys.push_back(key);
+      store.push_back();
+    }
+    return i;
+  }
+  // Adds partial sums to cell i; `touched`: some triangle touched the part.
+  void add(std::uint32_t i, const CellRecord& part, bool touched, std::uint32_t points,
+           const Vec3f& point_sum) {
+    CellRecord& to = store.records[i];
+    to.quadric += part.quadric;
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 4; ++c) to.border.slot[a][c] += part.border.slot[a][c];
+    if (touched) store.touch(i);
+    // A cell's mean stays that of the points counted, should its count ever saturate.
+    if (store.points[i] <= std::numeric_limits<std::uint32_t>::max() - points) {
+      store.points[i] += points;
+      store.point_sum[i] += point_sum;
+    }
+  }
+};
+
 // The sums gathered so far, moved onto the grid of half the resolution: a soup gives no vertex array to count
 // cells on before the pass, so a target-driven pass halves its grid whenever the cells outgrow the target,
 // which bounds its memory by the output's size whatever the surface. Every sum is linear, so the result is
 // what a pass on the coarser grid would have gathered, except that the border planes of edges that crossed
 // between sibling cells stay in their parent (a border running through the cell, where a coarse pass would
 // have missed the edges inside it).
-void coarsen_soup(Grid& grid, CellMap& map, std::vector<CellKey>& keys, CellStore& store,
-                  TripleSet<CellKey>& survivors) {
+void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
   grid = grid.coarser();
-  CellMap parents(keys.size() / 4);
-  std::vector<CellKey> parent_keys;
-  CellStore merged;
-  for (std::size_t i = 0; i < keys.size(); ++i) {
-    bool inserted;
-    const CellKey key = parent_key(keys[i]);
-    const std::uint32_t to = parents.insert(key, static_cast<std::uint32_t>(parent_keys.size()), inserted);
-    if (inserted) {
-      parent_keys.push_back(key);
-      merged.push_back();
-    }
-    const auto c = key_coords(keys[i]);
+  SoupCells parents;
+  parents.map = CellMap(cells.keys.size() / 4);
+  for (std::size_t i = 0; i < cells.keys.size(); ++i) {
+    const auto c = key_coords(cells.keys[i]);
     const Vec3f offset(static_cast<float>(c[0] & 1), static_cast<float>(c[1] & 1),
                        static_cast<float>(c[2] & 1));
-    const CellRecord& from = store.records[i];
-    CellRecord& record = merged.records[to];
-    record.quadric += from.quadric;
+    CellRecord part = cells.store.records[i];
     // A plane m.x + d = 0 in the child's cell units is m.x' + (d - m.offset) / 2 = 0 in the parent's.
-    for (int a = 0; a < 3; ++a) {
-      const std::array<float, 4>& s = from.border.slot[a];
-      std::array<float, 4>& t = record.border.slot[a];
-      const float shifted = s[3] - (s[0] * offset.x() + s[1] * offset.y() + s[2] * offset.z());
-      t[0] += s[0], t[1] += s[1], t[2] += s[2], t[3] += 0.5f * shifted;
+    for (std::array<float, 4>& t : part.border.slot) {
+      t[3] = 0.5f * (t[3] - (t[0] * offset.x() + t[1] * offset.y() + t[2] * offset.z()));
     }
-    if (CellStore::touched(from.quadric)) merged.touch(to);
-    if (merged.points[to] <= std::numeric_limits<std::uint32_t>::max() - store.points[i]) {
-      merged.points[to] += store.points[i];
-      merged.point_sum[to] += 0.5f * (store.point_sum[i] + static_cast<float>(store.points[i]) * offset);
-    }
+    const std::uint32_t points = cells.store.points[i];
+    parents.add(parents.number(parent_key(cells.keys[i])), part, CellStore::touched(part.quadric), points,
+                0.5f * (cells.store.point_sum[i] + static_cast<float>(points) * offset));
   }
   std::vector<CellTriple<CellKey>> triples;
   survivors.drain_into(triples);
@@ -997,9 +1014,7 @@ void coarsen_soup(Grid& grid, CellMap& map, std::vector<CellKey>& keys, CellStor
     if (t.seen_forward()) survivors.add(CellTriple<CellKey>::of(a, b, c));
     if (t.seen_reversed()) survivors.add(CellTriple<CellKey>::of(a, c, b));
   }
-  map = std::move(parents);
-  keys = std::move(parent_keys);
-  store = std::move(merged);
+  cells = std::move(parents);
 }
 
 FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
@@ -1013,11 +1028,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     cells.grid = Grid::power_of_two(stream.bounds(), level);
   }
   Grid grid = cells.grid;
-  // The cells in order of first appearance, chunk by chunk: the numbering, like the sums, follows the input
-  // alone.
-  CellMap map;
-  std::vector<CellKey> keys;
-  CellStore store;
+  SoupCells seen;
   TripleSet<CellKey> survivors;
   std::vector<SoupChunk> chunks;
   cells.input_triangles = run_batches(stream, options.progress, [&](const TriangleBatch& batch) {
@@ -1057,34 +1068,21 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
       const SoupChunk& chunk = chunks[j];
       const std::vector<CellKey>& ids = chunk.table.ids();
       for (std::uint32_t s = 0; s < ids.size(); ++s) {
-        bool inserted;
-        const std::uint32_t i = map.insert(ids[s], static_cast<std::uint32_t>(keys.size()), inserted);
-        if (inserted) {
-          check_cell_count(keys.size() + 1);
-          keys.push_back(ids[s]);
-          store.push_back();
-        }
-        CellRecord& to = store.records[i];
-        to.quadric += chunk.records[s].quadric;
-        for (int a = 0; a < 3; ++a)
-          for (int c = 0; c < 4; ++c) to.border.slot[a][c] += chunk.records[s].border.slot[a][c];
-        store.touch(i);
-        if (store.points[i] <= std::numeric_limits<std::uint32_t>::max() - chunk.points[s]) {
-          store.points[i] += chunk.points[s];
-          store.point_sum[i] += chunk.point_sum[s];
-        }
+        seen.add(seen.number(ids[s]), chunk.records[s], true, chunk.points[s], chunk.point_sum[s]);
       }
       for (const CellTriple<CellKey>& t : chunk.survivors) survivors.add(t);
       cells.surviving_instances += chunk.survivors.size();
     }
     // Between batches, whose cuts do not depend on the thread count, so neither does the grid.
-    while (options.target_cells > 0 && grid.level > 0 && keys.size() > 2 * options.target_cells) {
-      coarsen_soup(grid, map, keys, store, survivors);
+    while (options.target_cells > 0 && grid.level > 0 && seen.keys.size() > 2 * options.target_cells) {
+      coarsen_soup(grid, seen, survivors);
     }
   });
   cells.grid = grid;
   chunks = {};
-  map = CellMap();
+  seen.map = CellMap();
+  std::vector<CellKey>& keys = seen.keys;
+  CellStore& store = seen.store;
 
   // Number the cells in Morton order.
   const std::size_t count = keys.size();

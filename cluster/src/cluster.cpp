@@ -105,7 +105,7 @@ void store_attributes(const FineCells& cells, const Attributes& a, double points
   if (!cells.uv_sum.empty()) mesh.uvs[out] = (a.uv / divide).cast<float>();
 }
 
-// The weight to hand border_quadric() for the border planes the output quadrics carry. It weighs a border
+// The weight to hand border_quadrics() for the border planes the output quadrics carry. It weighs a border
 // crossing at w * cell^2; a border runs through a cell in about two crossings of one direction class, so
 // its weight per unit length is about 4 w cell, which should be carried_border_weight times the mean edge
 // length h, as a decimator's border edges would weigh.
@@ -114,27 +114,9 @@ double carried_border_scale(const FineCells& cells, const ClusterOptions& option
   double trace = 0;
   for (const Quadric& q : cells.quadrics) trace += q.a00 + q.a11 + q.a22;
   const double triangles = static_cast<double>(std::max<std::uint64_t>(cells.input_triangles, 1));
-  const double mean_area = trace / 3.0 / triangles;
-  // The edge of an equilateral triangle of that area.
-  const double h = std::sqrt(4.0 * mean_area / std::sqrt(3.0));
+  const double h = equilateral_edge(trace / 3.0 / triangles);
   const double scale = options.carried_border_weight * h / (4.0 * cells.grid.cell);
   return std::isfinite(scale) ? scale : 0.0;
-}
-
-// The carried planes are the original's borders alone. The sums also hold what creases leave (interior
-// edges whose two planes do not cancel), which placing a cluster's vertex wants, but the decimator's face
-// quadrics already hold both sides of a crease, and the pure decimator adds no crease planes of its own. A
-// border's summed normal lies in the surface, a crease's along its normal, so the fraction along the surface
-// tells them apart; its 8th power is a switch without a threshold to flip. Measured two-stage RMS over pure
-// decimation's at 0.1 % (horse, rocker-arm, bunny): 1.109, 1.163, 0.953 with crease planes carried; power 4:
-// 0.994, 1.162, 0.951; 8: 1.022, 0.926, 0.908; 16: 0.968, 1.150, 0.941 (rocker-arm at 20 faces swings with
-// any change); at 1 % about 1 % better (horse, bunny) and 6 % (rocker-arm).
-constexpr double kCarriedTangentPower = 8.0;
-
-Quadric carried_border(const FineCells& cells, std::size_t i, double weight) {
-  if (!cells.has_border() || !(weight > 0.0)) return Quadric();
-  return border_quadric(cells.border[i], cells.grid, cells.keys[i], cells.quadrics[i], weight,
-                        kCarriedTangentPower);
 }
 
 // Builds the output: one vertex per cluster, the clusters' triangles, and the surface quadrics.
@@ -155,12 +137,14 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
   if (!clustering) {
     // Every fine cell is an output vertex.
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-      const PlacementSums sums = cell_placement_sums(cells, i, options.boundary_weight);
+      Quadric carried;
+      const PlacementSums sums =
+          cell_placement_sums(cells, i, options.boundary_weight, carried_weight, &carried);
       mesh.positions[i] = place(sums, options.representative).point.cast<float>();
       Attributes a;
       write_attributes(cells, i, a);
       store_attributes(cells, a, sums.points, i, mesh);
-      if (options.border_in_quadrics) cells.quadrics[i] += carried_border(cells, i, carried_weight);
+      if (options.border_in_quadrics) cells.quadrics[i] += carried;
     });
     out.quadrics = std::move(cells.quadrics);
     triangles.reserve(cells.triangles.size());
@@ -182,10 +166,10 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
       Attributes a;
       for (std::uint32_t k = first[c]; k < first[c + 1]; ++k) {
         const std::uint32_t i = member[k];
-        const PlacementSums cell = cell_placement_sums(cells, i, options.boundary_weight);
-        sums.add(cell);
+        Quadric carried;
+        sums.add(cell_placement_sums(cells, i, options.boundary_weight, carried_weight, &carried));
         surface += cells.quadrics[i];
-        if (options.border_in_quadrics) surface += carried_border(cells, i, carried_weight);
+        if (options.border_in_quadrics) surface += carried;
         write_attributes(cells, i, a);
       }
       mesh.positions[c] = place(sums, options.representative).point.cast<float>();

@@ -9,6 +9,11 @@
 
 namespace ocsimp::cluster_detail {
 
+// The edge of an equilateral triangle of this area: a mesh's typical edge length from its mean triangle area.
+inline double equilateral_edge(double area) {
+  return std::sqrt(4.0 / std::sqrt(3.0) * area);
+}
+
 // What placement needs of a cluster; sums over its cells.
 struct PlacementSums {
   Quadric quadric;  // the surface quadric plus the border planes
@@ -29,22 +34,28 @@ struct PlacementSums {
     corners += o.corners;
   }
   Vec3d mean() const { return points > 0 ? Vec3d(point_sum / points) : box.center(); }
-  // The edge of an equilateral triangle of the mean area: how far past the cluster's cells the triangles
-  // whose planes make up its quadric reach.
-  double edge_length() const {
-    return corners > 0 ? std::sqrt(4.0 / std::sqrt(3.0) * corner_area / corners) : 0;
-  }
+  // The edge of a triangle of the mean area: how far past the cluster's cells the triangles whose planes
+  // make up its quadric reach.
+  double edge_length() const { return corners > 0 ? equilateral_edge(corner_area / corners) : 0; }
 };
 
-// The border planes of a cell as a quadric: each direction slot whose planes did not cancel becomes the
-// plane of their summed normal and offset, weighted by `weight` x cell_size^2 x the squared length of that
-// normal's component along the surface (`surface`: the cell's quadric, whose dominant eigenvector is taken
-// as the surface normal). With `tangent_power` p > 0 the weight also takes the p-th power of the fraction of
-// the normal that lies along the surface: 1 for a border, near 0 for what a crease leaves (see cluster.cpp).
-Quadric border_quadric(const BorderSums& border, const Grid& grid, CellKey key, const Quadric& surface,
-                       double weight, double tangent_power = 0);
+// The border planes of a cell as quadrics: each direction slot whose planes did not cancel becomes the plane
+// of their summed normal and offset, weighted by cell_size^2 x the squared length of that normal's component
+// along the surface (`surface`: the cell's quadric, whose dominant eigenvector is taken as the surface
+// normal), times `weight` for placing the cell's vertex. With `carried_weight` > 0 also the planes the output
+// quadric carries into a decimator: times `carried_weight` and a high power of the fraction of the normal
+// that lies along the surface, which is 1 for a border and near 0 for what a crease leaves (see place.cpp).
+// One eigen-decomposition serves both.
+struct BorderQuadrics {
+  Quadric placement;
+  Quadric carried;
+};
+BorderQuadrics border_quadrics(const BorderSums& border, const Grid& grid, CellKey key,
+                               const Quadric& surface, double weight, double carried_weight = 0);
 
-PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, double boundary_weight);
+// A cell's placement sums; with `carried` (and `carried_weight` > 0), also its carried border planes.
+PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, double boundary_weight,
+                                  double carried_weight = 0, Quadric* carried = nullptr);
 
 // Where the quadric representative may go: the cluster's box grown on each side by the edge length of its
 // triangles (at most the box's own size on that axis). The quadric sums the planes of triangles with a corner

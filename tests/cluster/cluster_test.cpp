@@ -30,6 +30,13 @@ ClusterOptions grid_options(std::uint32_t grid, Representative representative = 
   return o;
 }
 
+ClusterOptions octree_options(std::uint64_t vertices) {
+  ClusterOptions o;
+  o.octree = true;
+  o.target_vertices = vertices;
+  return o;
+}
+
 // Rotates and moves a mesh so that nothing lines up with the grid's axes; computed in double and rounded
 // once.
 const Eigen::Matrix3d kTilt = (Eigen::AngleAxisd(0.5, Vec3d(1, 2, 3).normalized()) *
@@ -511,11 +518,7 @@ TEST(Cluster, BorderPlanesRideInTheQuadricsOnRequest) {
     return std::min({std::abs(q.x()), std::abs(q.x() - 1), std::abs(q.y()), std::abs(q.y() - 1)});
   };
   for (int octree = 0; octree < 2; ++octree) {
-    ClusterOptions options = grid_options(12);
-    if (octree == 1) {
-      options.octree = true;
-      options.target_vertices = 60;
-    }
+    ClusterOptions options = octree == 1 ? octree_options(60) : grid_options(12);
     const QuadricMesh plain = run(square, options);
     options.border_in_quadrics = true;
     const QuadricMesh carried = run(square, options);
@@ -553,11 +556,7 @@ TEST(Cluster, CarriedPlanesAreBordersNotCreases) {
   // carried planes must add little there, while the open square above gets its border.
   const IndexedMesh cube = tilted(test::cube(30));
   for (int octree = 0; octree < 2; ++octree) {
-    ClusterOptions options = grid_options(9);
-    if (octree == 1) {
-      options.octree = true;
-      options.target_vertices = 80;
-    }
+    ClusterOptions options = octree == 1 ? octree_options(80) : grid_options(9);
     const QuadricMesh plain = run(cube, options);
     options.border_in_quadrics = true;
     const QuadricMesh carried = run(cube, options);
