@@ -352,6 +352,26 @@ class PlyStream final : public TriangleStream {
   bool swap_ = false;  // the file's byte order is not ours
 
   IndexedMesh vertices_;
+  // Triangle strips do not say how many triangles they make. Every strip index past a strip's first two adds
+  // at most one, so the index count bounds it: in a binary file, the bytes the other elements leave (when
+  // their records have a fixed size) over the index size; otherwise, or in ascii, no hint.
+  std::uint64_t strip_triangles_bound(const PlyElement& strips, std::uint64_t data_bytes) const {
+    if (ascii_) return 0;
+    std::uint64_t other_bytes = 0;
+    for (const PlyElement& element : header_.elements) {
+      if (&element == &strips) continue;
+      if (element.has_lists()) return 0;
+      const std::uint64_t size = element.min_binary_size();
+      if (size > 0 && element.count > (data_bytes - other_bytes) / size) return 0;
+      other_bytes += element.count * size;
+    }
+    const PlyProperty& list = strips.properties[index_property_];
+    const std::uint64_t record = strips.min_binary_size();
+    if (strips.count > (data_bytes - other_bytes) / std::max<std::uint64_t>(record, 1)) return 0;
+    const std::uint64_t index_bytes = data_bytes - other_bytes - strips.count * record;
+    return index_bytes / ply_type_size(list.type);
+  }
+
   Box3 bounds_;
   VertexPlan vertex_plan_;
   std::size_t vertex_element_ = 0;
@@ -462,7 +482,8 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
   const std::uint64_t data_bytes = reader_.file_size() - header_.data_offset;
   const std::uint64_t min_face_bytes =
       ascii_ ? 8 : ply_type_size(index_property.count_type) + 3 * ply_type_size(index_property.type);
-  triangles_hint_ = strips_ ? 0 : std::min(face_element.count, data_bytes / min_face_bytes);
+  triangles_hint_ = strips_ ? strip_triangles_bound(face_element, data_bytes)
+                            : std::min(face_element.count, data_bytes / min_face_bytes);
   bytes_total_ = reader_.file_size();
 
   std::size_t element = 0;

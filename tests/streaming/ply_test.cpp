@@ -618,6 +618,21 @@ TEST(PlyLayout, TriangleStripsWithRestarts) {
   const Drained small = drain(dir / "strips.ply", 1);
   EXPECT_EQ(small.triangles, expected);
   EXPECT_EQ(small.largest_batch, 1u);
+  // Ascii strips say nothing of their triangle count.
+  EXPECT_EQ(open_triangle_stream(dir / "strips.ply")->triangles_hint(), 0u);
+
+  // A binary strip file bounds it by its index count (14 indices for 4 triangles), so a pipeline sizing its
+  // stages by the hint never takes the file for smaller than it is.
+  Bytes out;
+  for (int v = 0; v < 8; ++v) out.put(float(v / 2)).put(float(v % 2)).put(0.0f);
+  out.put<std::int32_t>(14);
+  for (int i : {0, 1, 2, 3, 4, -1, 5, 6, 6, 7, -1, 4, 3, 5}) out.put<std::int32_t>(i);
+  write_bytes(dir / "strips_binary.ply",
+              "ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\nproperty float y\n"
+              "property float z\nelement tristrips 1\nproperty list int int vertex_indices\nend_header\n" +
+                  out.data);
+  EXPECT_EQ(read_mesh(dir / "strips_binary.ply").triangles, expected);
+  EXPECT_EQ(open_triangle_stream(dir / "strips_binary.ply")->triangles_hint(), 14u);
 }
 
 // Elements and properties we do not know, before, between and after the ones we read, in both encodings.
