@@ -59,7 +59,9 @@ TEST(Pipeline, NeverAboveTheTarget) {
   SimplifyOptions options;
   options.target_faces = 2'001;
   options.two_stage = true;
+  options.intermediate = 8;
   const SimplifyResult result = simplify(path, options);
+  ASSERT_TRUE(result.clustered);
   // The clustered intermediate need not be a closed manifold, so 2,001 may be reachable; above never.
   EXPECT_LE(result.mesh.face_count(), 2'001u);
   EXPECT_GE(result.mesh.face_count(), 2'000u);
@@ -72,7 +74,9 @@ TEST(Pipeline, RatioIsOfTheInputFaces) {
   options.target_ratio = 0.05;
   const SimplifyResult in_core = simplify(path, options);
   options.two_stage = true;
+  options.intermediate = 4;
   const SimplifyResult two_stage = simplify(path, options);
+  ASSERT_TRUE(two_stage.clustered);
   const auto expected =
       static_cast<std::size_t>(std::llround(0.05 * static_cast<double>(in_core.input_faces)));
   EXPECT_EQ(in_core.mesh.face_count(), expected);
@@ -140,6 +144,27 @@ TEST(Pipeline, CarriedBordersHoldWhateverTheIntermediateSize) {
   }
 }
 
+TEST(Pipeline, TwoStageDecimatesAnInputNoLargerThanItsIntermediateDirectly) {
+  // 20 k faces are below the smallest intermediate (2^18 faces): clustering them would merge nothing, so
+  // --two-stage without --intermediate gives exactly what pure decimation gives; with it, it clusters.
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 20'000, 1);
+  SimplifyOptions options;
+  options.target_faces = 200;
+  const SimplifyResult pure = simplify(path, options);
+  options.two_stage = true;
+  const SimplifyResult whole = simplify(path, options);
+  EXPECT_FALSE(whole.clustered);
+  EXPECT_EQ(whole.intermediate_faces, 0u);
+  EXPECT_EQ(whole.mesh.triangles, pure.mesh.triangles);
+  EXPECT_EQ(whole.mesh.positions, pure.mesh.positions);
+  options.intermediate = 8;
+  const SimplifyResult clustered = simplify(path, options);
+  EXPECT_TRUE(clustered.clustered);
+  EXPECT_LE(clustered.intermediate_faces, 8u * 200u);
+  EXPECT_EQ(clustered.mesh.face_count(), 200u);
+}
+
 TEST(Pipeline, OutOfCoreGivesTheInMemorySoupResult) {
   // A budget far below the vertex array (30k vertices, 360 kB) forces external dereferencing; the cluster
   // stage must then see exactly the triangles it sees when the same mesh is streamed from memory as a soup.
@@ -203,6 +228,7 @@ TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
 
   // Through the clustering stage the counts are just as exact.
   options.two_stage = true;
+  options.intermediate = 2;
   options.on_level = nullptr;
   const LodResult clustered = lod(path, options);
   EXPECT_TRUE(clustered.clustered);

@@ -76,7 +76,9 @@ void add_lod_command(CLI::App& app) {
       ->required();
   cmd->add_option("--memory-limit", flags->memory_limit,
                   "Peak memory budget, e.g. 2G (default: a third of RAM)");
-  cmd->add_flag("--two-stage", o.two_stage, "Cluster first even when the input fits in core");
+  cmd->add_flag("--two-stage", o.two_stage,
+                "Cluster first even when the input fits in core (an input no larger than the intermediate is "
+                "decimated directly unless --intermediate is given)");
   cmd->add_option("--intermediate", o.intermediate,
                   "Intermediate faces as a multiple of the largest level (default: from the memory budget)");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")

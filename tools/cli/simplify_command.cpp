@@ -58,7 +58,9 @@ void add_simplify_command(CLI::App& app) {
       "--memory-limit", flags->memory_limit,
       "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
       "fit what clustering leaves of it (at least half) is dereferenced on disk under TMPDIR");
-  cmd->add_flag("--two-stage", o.two_stage, "Cluster first even when the input fits in core");
+  cmd->add_flag("--two-stage", o.two_stage,
+                "Cluster first even when the input fits in core (an input no larger than the intermediate is "
+                "decimated directly unless --intermediate is given)");
   cmd->add_option(
       "--intermediate", o.intermediate,
       "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8)");
