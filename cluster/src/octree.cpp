@@ -3,9 +3,10 @@
 // Nodes are Morton prefixes of the fine cells. Every cluster sits at one node: a fine cell starts at its
 // parent, and a node whose children have all merged into a single cluster hands that cluster up to its own
 // parent. Two clusters at the same node may merge; the cost of a merge is the increase of quadric error,
-// E(a + b) - E(a) - E(b), with E a cluster's placement quadric at its representative. The cheapest merge
-// (then the lowest pair of cluster ids) goes first, one pair at a time, so the cluster count steps down by
-// exactly one.
+// E(a + b) - E(a) - E(b), with E a cluster's placement quadric at its representative (many times more for two
+// clusters no input triangle joins). The cheapest merge (then the lowest pair of cluster ids) goes first, one
+// pair at a time, so the cluster count steps down by exactly one; a node's merges wait until each of its
+// child nodes has merged its own clusters up to itself.
 //
 // The bookkeeping is laid out for the merge loop's memory traffic. A node's pair costs live in a small
 // triangular table of its child slots, with the merged cluster's error, so a merge recomputes only the
@@ -18,6 +19,8 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <bit>
 #include <cmath>
 
 #include "place.h"
@@ -28,10 +31,14 @@ namespace {
 
 constexpr std::uint32_t kEnd = ~std::uint32_t{0};
 
-// Merging clusters that are not face neighbours costs this many times its error increase: such a union is
-// not a compact region and its triangles tend to fold over its neighbours', so it should wait, but not for
-// every neighbour merge however expensive (that leaves small clusters stranded beside large ones).
-constexpr double kDetachedPenalty = 4.0;
+// Merging clusters that no input triangle joins costs this many times its error increase: such a union is
+// not a connected region and its output triangles fold over its neighbours', so it should wait, but not for
+// every neighbour merge however expensive (that leaves small clusters stranded beside large ones). Measured
+// on the shared scans and a generated 10 M scan (bench/cluster_quality.sh, octree at 10, 2 and 0.5 % of the
+// faces): x4 kept folds that set the scan's Hausdorff distance (2.4x the uniform grid's at 0.5 %); x16-x32
+// left some; x64 removed them; x128-x1000 left stray single cells as clusters of their own (vertices without
+// faces, holes) and lost RMS.
+constexpr double kDetachedPenalty = 64.0;
 
 // A node's cheapest merge; the order is total (cost, then the pair's ids), so the merge sequence does not
 // depend on how the heap happens to be laid out.
@@ -287,6 +294,31 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
       }
     }
   }
+  // Which octants of a node the surface joins: for every two cells of a surviving fine triangle, the two
+  // octants of their lowest common node that hold them. Two clusters at a node are neighbours when one of
+  // them covers an octant joined to an octant the other covers. Octants that merely share a face can hold
+  // cells several cells apart, and merging those made long triangles across the surface. A bitwise OR per
+  // triangle, so the result does not depend on the order or the threads.
+  std::vector<std::uint64_t> joined(nodes, 0);
+  {
+    const std::vector<std::uint64_t>& fine = prefix[levels];
+    tbb::parallel_for(std::size_t{0}, cells.triangles.size(), [&](std::size_t t) {
+      const CellTriangle& triangle = cells.triangles[t];
+      const std::uint32_t corner[3] = {triangle.first(), triangle.second(), triangle.third()};
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t u = corner[k], w = corner[k == 2 ? 0 : k + 1];
+        const std::uint64_t mu = fine[u], mw = fine[w];
+        // Levels from the cells' parent up to their lowest common node.
+        const int up = (63 - std::countl_zero(mu ^ mw)) / 3;
+        std::uint32_t id = cell_node[u];
+        for (int i = 0; i < up; ++i) id = node[id].parent;
+        const auto ou = static_cast<unsigned>(mu >> (3 * up)) & 7,
+                   ow = static_cast<unsigned>(mw >> (3 * up)) & 7;
+        const std::uint64_t bits = (std::uint64_t{1} << (8 * ou + ow)) | (std::uint64_t{1} << (8 * ow + ou));
+        std::atomic_ref<std::uint64_t>(joined[id]).fetch_or(bits, std::memory_order_relaxed);
+      }
+    });
+  }
   prefix = {};
   parent = {};
   std::uint64_t pairs_total = 0;
@@ -303,22 +335,16 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     cluster[i].sums = cell_placement_sums(cells, i, boundary_weight);
     cluster[i].error = place(cluster[i].sums, representative).error;
   });
-  static constexpr auto kNeighbours = [] {
-    std::array<std::uint8_t, 256> near{};
-    for (unsigned mask = 0; mask < 256; ++mask) {
-      for (unsigned o = 0; o < 8; ++o) {
-        if (mask & (1u << o))
-          near[mask] |= static_cast<std::uint8_t>((1u << (o ^ 1)) | (1u << (o ^ 2)) | (1u << (o ^ 4)));
-      }
-    }
-    return near;
-  }();
   // The sums are added lower id first, as the merge itself adds them, so the pair holds the merge's error.
   auto pair_of = [&](std::uint32_t a, std::uint32_t b) {
     if (a > b) std::swap(a, b);
     const Cluster &x = cluster[a], &y = cluster[b];
     // The octant masks change as clusters move up: the neighbour test is of this moment.
-    const bool detached = !(kNeighbours[x.octants] & y.octants);
+    bool detached = true;
+    const std::uint64_t row = joined[x.node];
+    for (unsigned o = 0; o < 8; ++o) {
+      if ((x.octants >> o & 1) && ((row >> (8 * o)) & y.octants)) detached = false;
+    }
     PlacementSums merged = x.sums;
     merged.add(y.sums);
     const double error = place(merged, representative).error;
@@ -374,12 +400,13 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   };
   // Cluster c is the whole of a child of node `id`: it takes its slot there and, while it is the whole of
   // the node too, moves on up. Returns the node it stays at (kEnd above the root).
+  std::vector<std::uint32_t> completed;  // nodes whose last child handed its cluster up, since last looked at
   auto arrive = [&](std::uint32_t c, std::uint32_t id, std::uint8_t octant, std::uint8_t slot) {
     Cluster& x = cluster[c];
     while (id != kEnd) {
       Node& v = node[id];
       x.octants = static_cast<std::uint8_t>(1u << octant);
-      --v.pending;
+      if (--v.pending == 0) completed.push_back(id);
       if (v.pending != 0 || v.present != 0) {
         v.member[slot] = c;
         ++v.present;
@@ -398,6 +425,15 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     arrive(static_cast<std::uint32_t>(i), cell_node[i], cell_octant[i], cell_slot[i]);
   }
   cell_node = {};
+  // A node merges only once each of its child nodes has merged all of its own clusters up to itself: merges
+  // then climb the levels together, and a cluster does not grow at a node while finer clusters beside it are
+  // still forming below (big clusters next to small ones make the long, folded triangles). `waiting` counts a
+  // node's child nodes still forming.
+  completed.clear();
+  std::vector<std::uint8_t> waiting(nodes, 0);
+  for (std::uint32_t id = 0; id < nodes; ++id) {
+    if (node[id].pending > 0 && node[id].parent != kEnd) ++waiting[node[id].parent];
+  }
   cell_octant = {};
   cell_slot = {};
   // The first costs, a placement each and most of the merge's arithmetic, are taken in parallel, node by
@@ -419,7 +455,8 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     std::vector<Best> entries;
     for (std::size_t id = 0; id < nodes; ++id) {
       Best best{};
-      if (node[id].present >= 2 && best_of(static_cast<std::uint32_t>(id), best)) entries.push_back(best);
+      if (node[id].present >= 2 && waiting[id] == 0 && best_of(static_cast<std::uint32_t>(id), best))
+        entries.push_back(best);
     }
     heap.assign(entries);
   }
@@ -453,10 +490,21 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
       if (up != kEnd && node[up].present >= 2) {
         prefetch(node[up]);
         pair_up(a);
-        Best best{};
-        best_of(up, best);
-        heap.set(best);
+        if (waiting[up] == 0) {
+          Best best{};
+          best_of(up, best);
+          heap.set(best);
+        }
       }
+      for (const std::uint32_t done : completed) {
+        const std::uint32_t p = node[done].parent;
+        if (p != kEnd && --waiting[p] == 0 && node[p].present >= 2) {
+          Best best{};
+          best_of(p, best);
+          heap.set(best);
+        }
+      }
+      completed.clear();
       return true;
     }
     Best best{};
