@@ -170,10 +170,8 @@ struct Cluster {
   PlacementSums sums;
   double error = 0;
   std::uint32_t node = kEnd;  // the node it sits at (kEnd: above the root)
-  // The octants of its node it covers: two clusters are neighbours when an octant of one shares a face
-  // with an octant of the other (the octant numbers differ in one bit).
-  std::uint8_t octants = 0;
-  std::uint8_t slot = 0;  // which of the node's slots it fills
+  std::uint8_t octants = 0;   // the octants of its node it covers (neighbours: see `joined`)
+  std::uint8_t slot = 0;      // which of the node's slots it fills
 };
 
 // A triangle of three distinct cluster ids, ascending.
@@ -465,6 +463,12 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   std::vector<std::array<std::uint32_t, 2>> merges;
   const std::size_t expected = target.faces > 0 ? 0 : (n > target.vertices ? n - target.vertices : 0);
   merges.reserve(expected);
+  // Puts node id's cheapest pair in the heap when it may merge now: two clusters there, no child node still
+  // forming.
+  auto offer = [&](std::uint32_t id) {
+    Best best{};
+    if (node[id].present >= 2 && waiting[id] == 0 && best_of(id, best)) heap.set(best);
+  };
   auto merge_next = [&] {
     if (heap.empty()) return false;
     const std::uint32_t id = heap.top();
@@ -490,28 +494,18 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
       if (up != kEnd && node[up].present >= 2) {
         prefetch(node[up]);
         pair_up(a);
-        if (waiting[up] == 0) {
-          Best best{};
-          best_of(up, best);
-          heap.set(best);
-        }
+        offer(up);
       }
       for (const std::uint32_t done : completed) {
         const std::uint32_t p = node[done].parent;
-        if (p != kEnd && --waiting[p] == 0 && node[p].present >= 2) {
-          Best best{};
-          best_of(p, best);
-          heap.set(best);
-        }
+        if (p != kEnd && --waiting[p] == 0) offer(p);
       }
       completed.clear();
       return true;
     }
-    Best best{};
     if (v.present >= 2) {
       pair_up(a);
-      best_of(id, best);
-      heap.set(best);
+      offer(id);
     } else {
       heap.erase(id);
     }

@@ -367,7 +367,7 @@ class PlyStream final : public TriangleStream {
     }
     const PlyProperty& list = strips.properties[index_property_];
     const std::uint64_t record = strips.min_binary_size();
-    if (strips.count > (data_bytes - other_bytes) / std::max<std::uint64_t>(record, 1)) return 0;
+    if (strips.count > (data_bytes - other_bytes) / record) return 0;  // record >= the list's count
     const std::uint64_t index_bytes = data_bytes - other_bytes - strips.count * record;
     return index_bytes / ply_type_size(list.type);
   }
