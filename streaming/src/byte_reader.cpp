@@ -66,4 +66,19 @@ void ByteReader::seek(std::uint64_t offset) {
   eof_ = false;
 }
 
+std::size_t ByteReader::read_at(std::uint64_t offset, char* out, std::size_t count) const {
+  std::size_t done = 0;
+  while (done < count) {
+    const ssize_t n = ::pread(fd_, out + done, count - done, static_cast<off_t>(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      throw Error(path_, FilePosition::byte(offset + done),
+                  std::string("read failed: ") + std::strerror(errno));
+    }
+    if (n == 0) break;
+    done += static_cast<std::size_t>(n);
+  }
+  return done;
+}
+
 }  // namespace ocsimp::detail

@@ -36,6 +36,10 @@ class ByteReader {
   // Restarts from byte `offset` (for formats that need a second look, like a bounds pre-scan).
   void seek(std::uint64_t offset);
 
+  // Reads up to `count` bytes at file offset `offset` into `out`, past the window and without moving it
+  // (pread: several threads may call it at once). Returns the bytes read, fewer only where the file ends.
+  std::size_t read_at(std::uint64_t offset, char* out, std::size_t count) const;
+
  private:
   std::string path_;
   int fd_ = -1;

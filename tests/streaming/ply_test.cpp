@@ -603,6 +603,64 @@ TEST(PlyLayout, PolygonsAreFanTriangulated) {
   EXPECT_EQ(stream->triangles_hint(), 5u);  // faces, not triangles: a hint
 }
 
+// Float x y z vertex blocks larger than the reader's window are read straight into the positions array, in
+// pieces by several threads: every vertex must land in place, the bounds must cover all of them, and a bad
+// coordinate or a short file far past the window must still be reported at its own vertex and byte.
+TEST(PlyLayout, LargeFloatVertexBlockReadDirectly) {
+  test::TempDir dir;
+  constexpr std::uint32_t kVertices = 1'500'001;  // 18 MB: past the 4 MiB window and across two batches
+  const std::string header = "ply\nformat binary_little_endian 1.0\nelement vertex " +
+                             std::to_string(kVertices) +
+                             "\nproperty float x\nproperty float y\nproperty float z\nelement face 1\n"
+                             "property list uchar int vertex_indices\nend_header\n";
+  auto position = [](std::uint32_t v) {
+    return Vec3f(static_cast<float>(v % 1000), static_cast<float>(v / 1000),
+                 static_cast<float>(v % 7) - 3.0f);
+  };
+  Bytes vertices;
+  for (std::uint32_t v = 0; v < kVertices; ++v) {
+    const Vec3f p = position(v);
+    vertices.put(p.x()).put(p.y()).put(p.z());
+  }
+  Bytes face;
+  face.put<std::uint8_t>(3).put<std::int32_t>(0).put<std::int32_t>(1).put<std::int32_t>(kVertices - 1);
+  write_bytes(dir / "big.ply", header + vertices.data + face.data);
+
+  const IndexedMesh mesh = read_mesh(dir / "big.ply");
+  ASSERT_EQ(mesh.positions.size(), kVertices);
+  std::uint32_t wrong = 0;
+  for (std::uint32_t v = 0; v < kVertices; ++v) wrong += mesh.positions[v] != position(v);
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_EQ(mesh.triangles, std::vector<Triangle>({{0, 1, kVertices - 1}}));
+  const Box3 bounds = open_triangle_stream(dir / "big.ply")->bounds();
+  EXPECT_EQ(bounds.lo, Vec3d(0, 0, -3));
+  EXPECT_EQ(bounds.hi, Vec3d(999, (kVertices - 1) / 1000, 3));
+
+  // A NaN in the second batch, and a file cut inside it.
+  constexpr std::uint32_t kBad = 1'234'567;
+  std::string bad = header + vertices.data + face.data;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::memcpy(bad.data() + header.size() + 12 * std::size_t{kBad} + 4, &nan, 4);
+  write_bytes(dir / "nan.ply", bad);
+  try {
+    read_mesh(dir / "nan.ply");
+    FAIL() << "read a NaN coordinate";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("vertex 1234567 has a coordinate that is not a finite float"),
+              std::string::npos)
+        << e.what();
+    EXPECT_EQ(e.position().kind, FilePosition::Kind::byte);
+    EXPECT_EQ(e.position().value, header.size() + 12 * std::uint64_t{kBad});
+  }
+  write_bytes(dir / "cut.ply", header + vertices.data.substr(0, 12 * std::size_t{kBad}));
+  try {
+    read_mesh(dir / "cut.ply");
+    FAIL() << "read a truncated vertex block";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("element vertex"), std::string::npos) << e.what();
+  }
+}
+
 TEST(PlyLayout, TriangleStripsWithRestarts) {
   test::TempDir dir;
   // Strip 0 1 2 3 4 gives (0 1 2) (2 1 3) (2 3 4); after -1, strip 5 6 6 7 has only degenerate triangles, and
