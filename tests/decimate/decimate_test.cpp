@@ -271,6 +271,19 @@ TEST(Decimate, CubeKeepsItsCorners) {
   }
 }
 
+// The longest edge at each vertex.
+std::vector<double> longest_edges(const IndexedMesh& mesh) {
+  std::vector<double> longest(mesh.vertex_count(), 0);
+  for (const Triangle& t : mesh.triangles) {
+    for (int i = 0; i < 3; ++i) {
+      const double l = (mesh.positions[t[i]] - mesh.positions[t[(i + 1) % 3]]).norm();
+      longest[t[i]] = std::max(longest[t[i]], l);
+      longest[t[(i + 1) % 3]] = std::max(longest[t[(i + 1) % 3]], l);
+    }
+  }
+  return longest;
+}
+
 TEST(Decimate, SphereVerticesStayNearTheSphere) {
   const IndexedMesh sphere = test::sphere(5);
   const DecimateResult r = run(sphere, faces(500));
@@ -278,14 +291,7 @@ TEST(Decimate, SphereVerticesStayNearTheSphere) {
   // The quadric minimizer of a cap of tangent planes sits slightly outside the sphere, by about a quarter of
   // the cap's squared angle: each vertex stays within half the square of its longest edge of the sphere (the
   // sagitta of that edge is an eighth of it), and none is far in absolute terms (edges are about 0.24 long).
-  std::vector<double> longest(r.mesh.vertex_count(), 0);
-  for (const Triangle& t : r.mesh.triangles) {
-    for (int i = 0; i < 3; ++i) {
-      const double l = (r.mesh.positions[t[i]] - r.mesh.positions[t[(i + 1) % 3]]).norm();
-      longest[t[i]] = std::max(longest[t[i]], l);
-      longest[t[(i + 1) % 3]] = std::max(longest[t[(i + 1) % 3]], l);
-    }
-  }
+  const std::vector<double> longest = longest_edges(r.mesh);
   double worst = 0;
   for (std::size_t v = 0; v < r.mesh.vertex_count(); ++v) {
     const double off = std::abs(r.mesh.positions[v].cast<double>().norm() - 1);
@@ -453,22 +459,26 @@ TEST(Decimate, ShapePenaltyKeepsSliversOut) {
 
 // ------------------------------------------------------------------ boundaries
 
-TEST(Decimate, LockedBoundaryDoesNotMove) {
-  const IndexedMesh bumpy =
-      height_field(24, [](double x, double y) { return 0.2 * std::sin(4 * x) * std::sin(3 * y + 0.5); });
+// A bumpy unit square, n x n cells, and the points of its border.
+IndexedMesh bumpy_square(int n) {
+  return height_field(n, [](double x, double y) { return 0.2 * std::sin(4 * x) * std::sin(3 * y + 0.5); });
+}
+std::set<std::array<float, 3>> square_border(const IndexedMesh& mesh) {
   std::set<std::array<float, 3>> border;
-  for (const Vec3f& p : bumpy.positions) {
+  for (const Vec3f& p : mesh.positions) {
     if (p.x() == 0 || p.x() == 1 || p.y() == 0 || p.y() == 1) border.insert({p.x(), p.y(), p.z()});
   }
+  return border;
+}
+
+TEST(Decimate, LockedBoundaryDoesNotMove) {
+  const IndexedMesh bumpy = bumpy_square(24);
+  const std::set<std::array<float, 3>> border = square_border(bumpy);
   DecimateOptions o = faces(150);
   o.lock_boundary = true;
   const DecimateResult r = run(bumpy, o);
   EXPECT_EQ(r.mesh.face_count(), 150u);
-  std::set<std::array<float, 3>> out_border;
-  for (const Vec3f& p : r.mesh.positions) {
-    if (p.x() == 0 || p.x() == 1 || p.y() == 0 || p.y() == 1) out_border.insert({p.x(), p.y(), p.z()});
-  }
-  EXPECT_EQ(out_border, border);  // every border vertex kept, none moved, none added
+  EXPECT_EQ(square_border(r.mesh), border);  // every border vertex kept, none moved, none added
   EXPECT_EQ(analyze_topology(r.mesh).boundary_edges, 4u * 24u);
 
   // Far below what the border allows: blocked, with the reason.
@@ -713,6 +723,120 @@ TEST(Decimate, AttributeWeightKeepsAttributeSeamsSharp) {
   const std::size_t plain = blended(0.0), weighted = blended(1.0);
   EXPECT_GT(plain, 5u);
   EXPECT_LT(weighted, plain / 2);
+}
+
+// ------------------------------------------------------------------ the parallel first phase
+// Meshes of 16384 faces or more are first decimated region by region in parallel (see decimate.cpp); these
+// tests use meshes above that size.
+
+TEST(Decimate, FirstPhaseGivesIdenticalBytesForAnyThreadCount) {
+  IndexedMesh shape = torus(240, 120);  // 57600 faces: four regions
+  for (Vec3f& p : shape.positions) p *= 1 + 0.05f * std::sin(13 * p.x()) * std::sin(11 * p.z());
+  for (std::uint64_t target : {5760u, 576u}) {
+    DecimateOptions o = faces(target);
+    o.threads = 1;
+    const DecimateResult one = run(shape, o);
+    EXPECT_EQ(one.mesh.face_count(), target);
+    for (int threads : {2, 3}) {
+      o.threads = threads;
+      const DecimateResult r = run(shape, o);
+      ASSERT_EQ(one.mesh.positions.size(), r.mesh.positions.size()) << threads;
+      EXPECT_EQ(std::memcmp(one.mesh.positions.data(), r.mesh.positions.data(),
+                            one.mesh.positions.size() * sizeof(Vec3f)),
+                0)
+          << threads;
+      EXPECT_EQ(one.mesh.triangles, r.mesh.triangles) << threads;
+      EXPECT_EQ(one.stats.collapses, r.stats.collapses);
+      EXPECT_EQ(one.stats.rejected_flip, r.stats.rejected_flip);
+      EXPECT_EQ(one.stats.max_error, r.stats.max_error);
+    }
+  }
+}
+
+TEST(Decimate, FirstPhaseMeetsExactCounts) {
+  const IndexedMesh sphere = test::sphere(6);  // 32768 faces, closed
+  for (std::uint64_t target : {16000u, 3000u, 100u}) {
+    const DecimateResult r = run(sphere, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target);
+    EXPECT_EQ(r.stats.faces, target);
+    EXPECT_EQ(r.stats.stop, DecimateStop::target_reached);
+    EXPECT_EQ(euler_characteristic(r.mesh), 2);
+    EXPECT_EQ(analyze_topology(r.mesh).boundary_edges, 0u);
+  }
+  const DecimateResult odd = run(sphere, faces(2001));
+  EXPECT_EQ(odd.mesh.face_count(), 2000u);
+  EXPECT_EQ(odd.stats.stop, DecimateStop::parity);
+  for (std::uint64_t target : {5000u, 77u}) {
+    DecimateOptions o;
+    o.target_vertices = target;
+    const DecimateResult r = run(sphere, o);
+    EXPECT_EQ(r.mesh.vertex_count(), target);
+    EXPECT_EQ(analyze_topology(r.mesh).unreferenced_vertices, 0u);
+  }
+  const IndexedMesh bumpy =
+      height_field(120, [](double x, double y) { return 0.1 * std::sin(6 * x) * std::cos(5 * y); });
+  ASSERT_EQ(bumpy.face_count(), 28800u);
+  for (std::uint64_t target : {2881u, 300u, 7u}) {
+    const DecimateResult r = run(bumpy, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target);
+    EXPECT_EQ(r.stats.stop, DecimateStop::target_reached);
+  }
+}
+
+TEST(Decimate, FirstPhaseKeepsASphereOnTheSphere) {
+  const IndexedMesh sphere = test::sphere(7);  // 131072 faces
+  const DecimateResult r = run(sphere, faces(2000));
+  ASSERT_EQ(r.mesh.face_count(), 2000u);
+  EXPECT_EQ(euler_characteristic(r.mesh), 2);
+  // As in SphereVerticesStayNearTheSphere: within half the square of the longest incident edge, and all
+  // faces facing out; no face turned against the input surface.
+  const std::vector<double> longest = longest_edges(r.mesh);
+  for (std::size_t v = 0; v < r.mesh.vertex_count(); ++v) {
+    EXPECT_LT(std::abs(r.mesh.positions[v].cast<double>().norm() - 1), 0.5 * longest[v] * longest[v]) << v;
+  }
+  for (const Triangle& t : r.mesh.triangles) {
+    const Vec3d centroid =
+        (r.mesh.positions[t[0]] + r.mesh.positions[t[1]] + r.mesh.positions[t[2]]).cast<double>();
+    EXPECT_GT(face_normal(r.mesh, t).dot(centroid), 0);
+  }
+  EXPECT_EQ(turned_faces(sphere, r.mesh), 0u);
+  // The regions leave no seam: edge lengths stay even over the sphere (a seam would keep a band of input
+  // edges, about 0.012 long, where the rest are about 0.1).
+  double shortest = std::numeric_limits<double>::infinity(), total = 0;
+  for (const Triangle& t : r.mesh.triangles) {
+    for (int i = 0; i < 3; ++i) {
+      const double l = (r.mesh.positions[t[i]] - r.mesh.positions[t[(i + 1) % 3]]).norm();
+      shortest = std::min(shortest, l);
+      total += l;
+    }
+  }
+  EXPECT_GT(shortest, 0.2 * total / (3.0 * r.mesh.face_count()));
+}
+
+TEST(Decimate, FirstPhaseKeepsLockedBordersAndTheErrorBound) {
+  const IndexedMesh bumpy = bumpy_square(120);
+  DecimateOptions o = faces(3000);
+  o.lock_boundary = true;
+  const DecimateResult r = run(bumpy, o);
+  EXPECT_EQ(r.mesh.face_count(), 3000u);
+  EXPECT_EQ(square_border(r.mesh), square_border(bumpy));
+  EXPECT_EQ(turned_faces(bumpy, r.mesh), 0u);
+
+  const IndexedMesh sphere = test::sphere(6);
+  std::size_t previous_faces = 0;
+  for (double bound : {1e-3, 1e-2}) {
+    DecimateOptions e;
+    e.max_error = bound;
+    const DecimateResult m = run(sphere, e);
+    EXPECT_LE(m.stats.max_error, bound);
+    EXPECT_EQ(m.stats.stop, DecimateStop::max_error);
+    EXPECT_LT(m.mesh.face_count(), sphere.face_count());
+    if (previous_faces > 0) {
+      EXPECT_LT(m.mesh.face_count(), previous_faces);
+    }
+    previous_faces = m.mesh.face_count();
+    for (const Vec3f& p : m.mesh.positions) EXPECT_LT(std::abs(p.cast<double>().norm() - 1), 4 * bound);
+  }
 }
 
 // ------------------------------------------------------------------ determinism and errors

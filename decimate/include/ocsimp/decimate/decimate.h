@@ -90,7 +90,8 @@ struct DecimateOptions {
   // (an LOD chain) still measures distance to the original surface.
   bool output_quadrics = false;
 
-  // Threads for the setup phases (0: all cores). The result does not depend on it.
+  // Threads for the setup and for the first decimation phase over spatial regions, on meshes of 16 Ki faces
+  // or more (0: all cores). The result does not depend on it.
   int threads = 0;
   // Collapses done out of collapses expected ("decimate" phase; total 0 when only max_error is given).
   ProgressFn progress;
