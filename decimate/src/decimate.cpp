@@ -538,14 +538,38 @@ struct Decimator {
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
   }
 
+  // A face's plane quadric, in a struct without default member values: the array of them is written in full
+  // by a parallel loop, and zeroing it first (as a Quadric array is) cost a serial pass and its page faults.
+  struct PlaneTerm {
+    double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
+  };
+  static void add_term(Quadric& q, const PlaneTerm& t) {
+    q.a00 += t.a00;
+    q.a01 += t.a01;
+    q.a02 += t.a02;
+    q.a11 += t.a11;
+    q.a12 += t.a12;
+    q.a22 += t.a22;
+    q.b0 += t.b0;
+    q.b1 += t.b1;
+    q.b2 += t.b2;
+    q.c += t.c;
+  }
+
   // Sums the area-weighted plane quadric of every face into its corners. Each face's plane is computed once
   // (a vertex-by-vertex pass computes it at each of the three corners), in parallel over a block of faces;
   // the sums are then added up in face order, so each vertex adds its faces in the order of its face list,
   // whatever the thread count.
   void face_quadrics() {
     const std::size_t nf = faces.size();
-    constexpr std::size_t block = 16384, grain = 1024;
-    std::vector<Quadric> terms(std::min(nf, block));
+    constexpr std::size_t grain = 1024;
+    // Up to this many faces, every face's plane is kept at once (80 bytes each, freed before the edges'
+    // costs are computed) and each vertex sums its own faces' planes through its face list, in face order as
+    // below: one pass over the corners instead of one per vertex range.
+    constexpr std::size_t kAllTermsFaces = std::size_t{1} << 19;
+    const bool all_at_once = nf <= kAllTermsFaces;
+    const std::size_t block = all_at_once ? std::max<std::size_t>(nf, 1) : 16384;
+    BigVector<PlaneTerm> terms(std::min(nf, block));
     const bool area = opt.area_weighting;
     // Two vertex ranges per core: every task scans the whole block, so more would only repeat that scan.
     const std::size_t nv = verts.size();
@@ -559,7 +583,7 @@ struct Decimator {
           const Vec3d p0 = rel(f.v[0]);
           const Vec3d n = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
           const double length2 = n.squaredNorm();
-          Quadric& t = terms[i];
+          PlaneTerm& t = terms[i];
           if (!(length2 > 0)) {
             t.c = -1;  // marks a degenerate face: it adds nothing (a real c is a square, never negative)
             continue;
@@ -573,13 +597,27 @@ struct Decimator {
                wz * n.z(), wx * d,     wy * d,     wz * d,     w * d * d};
         }
       });
+      if (all_at_once) {
+        parallel_chunks(nv, 4096, [&](std::size_t begin, std::size_t end) {
+          for (std::size_t v = begin; v < end; ++v) {
+            Vertex& x = verts[v];
+            Quadric sum = x.q;
+            for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
+              const PlaneTerm& t = terms[vf[i]];
+              if (t.c >= 0) add_term(sum, t);
+            }
+            x.q = sum;
+          }
+        });
+        continue;
+      }
       // Each task owns a range of vertices and adds only to those, so no two write the same record.
       parallel_chunks(nv, owned, [&](std::size_t low, std::size_t high) {
         for (std::size_t i = 0; i < count; ++i) {
-          const Quadric& t = terms[i];
+          const PlaneTerm& t = terms[i];
           if (t.c < 0) continue;
           for (Index v : faces[first + i].v) {
-            if (v >= low && v < high) verts[v].q += t;
+            if (v >= low && v < high) add_term(verts[v].q, t);
           }
         }
       });
@@ -1567,11 +1605,11 @@ struct Decimator {
     // Half a region's width, in cells, for a surface: a region covers about kSide^2 / regions cells of it.
     const double shift = pass == 0 ? 0.0 : 0.5 * kSide / std::sqrt(double(regions));
     const double scale = box_extent > 0 ? (kSide - shift) / box_extent : 0.0;
-    auto spread = [](std::uint32_t x) {  // bit i to bit 3i
-      std::uint32_t r = 0;
-      for (int i = 0; i < kBits; ++i) r |= ((x >> i) & 1u) << (3 * i);
-      return r;
-    };
+    std::uint32_t spread[kSide];  // bit i to bit 3i
+    for (std::uint32_t x = 0; x < kSide; ++x) {
+      spread[x] = 0;
+      for (int i = 0; i < kBits; ++i) spread[x] |= ((x >> i) & 1u) << (3 * i);
+    }
     parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = begin; v < end; ++v) {
         const Vertex& x = verts[v];
@@ -1582,18 +1620,19 @@ struct Decimator {
         std::uint32_t code = 0;
         for (int a = 0; a < 3; ++a) {
           const double c = std::clamp((double(x.p[a]) - box_low[a]) * scale + shift, 0.0, double(kSide - 1));
-          code |= spread(static_cast<std::uint32_t>(c)) << ((a + pass) % 3);
+          code |= spread[static_cast<std::uint32_t>(c)] << ((a + pass) % 3);
         }
         ids[v] = code;
       }
     });
-    std::vector<std::uint64_t> cell_count(kCells + 1, 0);
+    std::vector<std::uint32_t> cell_count(kCells + 1, 0);
     for (std::size_t v = 0; v < nv; ++v) ++cell_count[ids[v]];
     std::vector<std::uint32_t> cell_region(kCells + 1, kOutside);
     std::vector<std::uint64_t> per_region(regions, 0);
     const std::uint64_t total = std::max<std::uint64_t>(1, verts_alive);
     std::uint64_t before = 0;
     for (std::uint32_t c = 0; c < kCells; ++c) {
+      if (cell_count[c] == 0) continue;  // no vertex reads it; most cells of a surface are empty
       // A cell goes to the region its middle vertex falls in.
       const std::uint64_t middle = before + cell_count[c] / 2;
       const auto r =
