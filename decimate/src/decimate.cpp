@@ -543,18 +543,6 @@ struct Decimator {
   struct PlaneTerm {
     double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
   };
-  static void add_term(Quadric& q, const PlaneTerm& t) {
-    q.a00 += t.a00;
-    q.a01 += t.a01;
-    q.a02 += t.a02;
-    q.a11 += t.a11;
-    q.a12 += t.a12;
-    q.a22 += t.a22;
-    q.b0 += t.b0;
-    q.b1 += t.b1;
-    q.b2 += t.b2;
-    q.c += t.c;
-  }
 
   // Sums the area-weighted plane quadric of every face into its corners. Each face's plane is computed once
   // (a vertex-by-vertex pass computes it at each of the three corners), in parallel over a block of faces;
@@ -604,7 +592,7 @@ struct Decimator {
             Quadric sum = x.q;
             for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
               const PlaneTerm& t = terms[vf[i]];
-              if (t.c >= 0) add_term(sum, t);
+              if (t.c >= 0) add_to(sum, t);
             }
             x.q = sum;
           }
@@ -617,7 +605,7 @@ struct Decimator {
           const PlaneTerm& t = terms[i];
           if (t.c < 0) continue;
           for (Index v : faces[first + i].v) {
-            if (v >= low && v < high) add_term(verts[v].q, t);
+            if (v >= low && v < high) add_to(verts[v].q, t);
           }
         }
       });

@@ -14,7 +14,9 @@ struct Placement {
   double error;  // Q(point), clamped at 0
 };
 
-inline void add_to(Quadric& sum, const Quadric& q) {
+// `q`: a Quadric, or any record with the same ten coefficients (such as a face's plane term).
+template <class Coefficients>
+inline void add_to(Quadric& sum, const Coefficients& q) {
   sum.a00 += q.a00;
   sum.a01 += q.a01;
   sum.a02 += q.a02;
