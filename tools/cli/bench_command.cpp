@@ -1,11 +1,8 @@
 // ocsimp bench: every simplification method at every face target on one mesh, with time, memory, faces
 // reached and distance to the original (tools/bench_methods.h); bench/run_bench.sh drives it.
-#include <tbb/global_control.h>
-
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <optional>
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
@@ -96,10 +93,7 @@ void add_bench_command(CLI::App& app) {
       };
     }
     // The methods take their thread count from `options.threads`; this only limits the distance sampling.
-    std::optional<tbb::global_control> limit;
-    if (flags->distance_threads > 0) {
-      limit.emplace(tbb::global_control::max_allowed_parallelism, flags->distance_threads);
-    }
+    const auto limit = limit_threads(flags->distance_threads);
     const std::vector<BenchResult> results = run_bench(input, methods, targets, flags->ratios, options);
 
     std::fputs(bench_markdown_table(results).c_str(), stdout);

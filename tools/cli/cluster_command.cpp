@@ -1,10 +1,7 @@
 // ocsimp cluster: streaming vertex clustering, one pass over the input.
-#include <tbb/global_control.h>
-
 #include <chrono>
 #include <cstdio>
 #include <memory>
-#include <optional>
 
 #include "commands.h"
 #include "ocsimp/cluster/cluster.h"
@@ -77,8 +74,7 @@ void add_cluster_command(CLI::App& app) {
     if (options.octree && flags->vertices == 0 && flags->faces == 0) {
       throw Error("--octree needs --vertices N or --faces N");
     }
-    std::optional<tbb::global_control> limit;
-    if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+    const auto limit = limit_threads(static_cast<int>(options.threads));
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;
 

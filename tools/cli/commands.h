@@ -1,8 +1,10 @@
 // The subcommands of `ocsimp`, one file each (cli/<name>_command.cpp), and what they share.
 #pragma once
 
+#include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -30,6 +32,10 @@ ProgressFn make_progress(bool quiet);
 void write_json_report(const std::string& path, const nlohmann::json& report);
 
 double seconds_since(std::chrono::steady_clock::time_point start);
+
+// Keeps every parallel loop of the command, the readers' included, to `threads` cores while the result
+// lives; 0 (or less): all cores, and nothing is returned.
+std::unique_ptr<tbb::global_control> limit_threads(int threads);
 
 // Whether the end-of-run summary goes to stdout: not with --quiet, and not on a pipe or file (where only
 // errors are written; --report gives the same numbers as JSON).

@@ -1,10 +1,7 @@
 // ocsimp compare: Metro-style distance between an original mesh and its simplification.
-#include <tbb/global_control.h>
-
 #include <chrono>
 #include <cstdio>
 #include <memory>
-#include <optional>
 
 #include "commands.h"
 #include "ocsimp/streaming/io.h"
@@ -65,8 +62,7 @@ void add_compare_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
-    std::optional<tbb::global_control> limit;
-    if (flags->threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, flags->threads);
+    const auto limit = limit_threads(flags->threads);
     const ProgressFn progress = make_progress(flags->quiet);
     CompareOptions options = flags->options;
     options.include_vertices = !flags->no_vertices;

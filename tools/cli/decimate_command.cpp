@@ -1,13 +1,10 @@
 // ocsimp decimate: Garland-Heckbert quadric edge collapse of a whole mesh in memory, to an exact face or
 // vertex count or to an error bound.
-#include <tbb/global_control.h>
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <memory>
-#include <optional>
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
@@ -72,9 +69,7 @@ void add_decimate_command(CLI::App& app) {
     const auto start = std::chrono::steady_clock::now();
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
     DecimateOptions options = flags->options;
-    // The readers load large vertex blocks on several threads: they keep to --threads like the stages do.
-    std::optional<tbb::global_control> limit;
-    if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+    const auto limit = limit_threads(options.threads);
     options.area_weighting = !flags->no_area_weighting;
     if (options.target_faces == 0 && options.target_vertices == 0 && options.target_ratio == 0 &&
         !(options.max_error < std::numeric_limits<double>::infinity())) {

@@ -1,14 +1,11 @@
 // ocsimp lod: a chain of levels of detail from one read of the input, each decimated from the previous one
 // with its quadrics carried, so every level's error is a distance to the original surface.
-#include <tbb/global_control.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <functional>
 #include <limits>
 #include <memory>
-#include <optional>
 #include <sstream>
 
 #include "commands.h"
@@ -91,9 +88,7 @@ void add_lod_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors (no progress bars, no summary)");
   cmd->callback([flags] {
     LodOptions options = flags->options;
-    // The readers load large vertex blocks on several threads: they keep to --threads like the stages do.
-    std::optional<tbb::global_control> limit;
-    if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+    const auto limit = limit_threads(options.threads);
     options.level_faces = parse_levels(flags->faces);
     const bool several = options.level_faces.size() > 1;
     // Refuse a bad pattern or format before reading anything.

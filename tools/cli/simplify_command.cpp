@@ -1,12 +1,9 @@
 // ocsimp simplify: the whole pipeline, from a file of any size to an exact target.
-#include <tbb/global_control.h>
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <memory>
-#include <optional>
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
@@ -74,9 +71,7 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors (no progress bars, no summary)");
   cmd->callback([flags] {
     SimplifyOptions options = flags->options;
-    // The readers load large vertex blocks on several threads: they keep to --threads like the stages do.
-    std::optional<tbb::global_control> limit;
-    if (options.threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, options.threads);
+    const auto limit = limit_threads(options.threads);
     if (options.target_faces == 0 && options.target_ratio == 0 && !std::isfinite(options.max_error)) {
       throw Error("simplify: give --faces, --ratio or --max-error");
     }
