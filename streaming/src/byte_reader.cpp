@@ -42,25 +42,15 @@ std::size_t ByteReader::fill(std::size_t count) {
     cursor_ = 0;
     end_ = tail;
   }
-  while (end_ < count && end_ < buffer_.size()) {
-    const ssize_t n = ::read(fd_, buffer_.data() + end_, buffer_.size() - end_);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0)
-      throw Error(path_, FilePosition::byte(window_offset_ + end_),
-                  std::string("read failed: ") + std::strerror(errno));
-    if (n == 0) {
-      eof_ = true;
-      break;
-    }
-    end_ += static_cast<std::size_t>(n);
-  }
+  // The window is filled whole: read_at returns less only where the file ends.
+  const std::size_t room = buffer_.size() - end_;
+  const std::size_t n = read_at(window_offset_ + end_, buffer_.data() + end_, room);
+  end_ += n;
+  if (n < room) eof_ = true;
   return available();
 }
 
 void ByteReader::seek(std::uint64_t offset) {
-  if (::lseek(fd_, static_cast<off_t>(offset), SEEK_SET) < 0) {
-    throw Error(path_, FilePosition::byte(offset), std::string("seek failed: ") + std::strerror(errno));
-  }
   window_offset_ = offset;
   cursor_ = end_ = 0;
   eof_ = false;
