@@ -891,27 +891,32 @@ struct Decimator {
 
   // ---------------------------------------------------------------- adjacency
 
+  // The ids of the live faces around head vertex v, read only: the region loops of the first phase may be
+  // packing other vertices' lists meanwhile.
+  template <class Body>
+  void for_live_faces(Index v, const Body& body) const {
+    Index seg = v;
+    do {
+      const Vertex& s = verts[seg];
+      const Index* list = vf.data() + s.seg_start;
+      for (Index i = 0; i < s.seg_count; ++i) {
+        if (face_alive(list[i])) body(list[i]);
+      }
+      seg = s.seg_next;
+    } while (seg != v);
+  }
+
   // The live faces around head vertex v. They are packed into as few of its segments as hold them (in
   // circle order, v's own first) and the emptied segments are unlinked: a vertex that absorbed many others
   // would otherwise keep a few live faces in each of their segments, and every gather would visit all of
   // those scattered vertex records and lists (about a fifth of the collapse loop's cache misses).
   void gather_faces(Index v, std::vector<Index>& out) {
     out.clear();
-    Index seg = v;
-    bool single = true;
-    do {
-      const Vertex& s = verts[seg];
-      const Index* list = vf.data() + s.seg_start;
-      for (Index i = 0; i < s.seg_count; ++i) {
-        const Index f = list[i];
-        if (face_alive(f)) out.push_back(f);
-      }
-      seg = s.seg_next;
-      single = single && seg == v;
-    } while (seg != v);
+    for_live_faces(v, [&](Index f) { out.push_back(f); });
+    const bool single = verts[v].seg_next == v;
     std::size_t written = 0;
     Index prev = v;
-    seg = v;
+    Index seg = v;
     do {
       Vertex& s = verts[seg];
       const Index next = s.seg_next;
@@ -1041,14 +1046,23 @@ struct Decimator {
     return (target_f > 0 && faces_alive <= target_f) || (target_v > 0 && verts_alive <= target_v);
   }
 
-  std::uint64_t expected_collapses() const {
-    std::uint64_t expected = 0;
-    if (target_v > 0) expected = stats.input_vertices > target_v ? stats.input_vertices - target_v : 0;
+  // The collapses the count targets ask for (one removes about one vertex and two faces); infinite when
+  // there is none.
+  double collapses_needed() const {
+    double needed = std::numeric_limits<double>::infinity();
     if (target_f > 0) {
-      const std::uint64_t by_faces = stats.input_faces > target_f ? (stats.input_faces - target_f) / 2 : 0;
-      expected = target_v > 0 ? std::min(expected, by_faces) : by_faces;
+      needed =
+          std::min(needed, stats.input_faces > target_f ? double(stats.input_faces - target_f) / 2 : 0.0);
     }
-    return expected;
+    if (target_v > 0) {
+      needed =
+          std::min(needed, stats.input_vertices > target_v ? double(stats.input_vertices - target_v) : 0.0);
+    }
+    return needed;
+  }
+  std::uint64_t expected_collapses() const {
+    const double needed = collapses_needed();
+    return needed < std::numeric_limits<double>::infinity() ? static_cast<std::uint64_t>(needed) : 0;
   }
 
   void run() {
@@ -1569,19 +1583,6 @@ struct Decimator {
     for (int pass = 0; pass < kPasses; ++pass) run_pass(pass);
   }
 
-  // The live faces around head vertex v, read only (other regions' loops may be packing their own lists).
-  template <class Body>
-  void for_live_faces(Index v, const Body& body) const {
-    Index seg = v;
-    do {
-      const Vertex& s = verts[seg];
-      for (Index i = s.seg_start; i < s.seg_start + s.seg_count; ++i) {
-        if (face_alive(vf[i])) body(faces[vf[i]]);
-      }
-      seg = s.seg_next;
-    } while (seg != v);
-  }
-
   // Regions are ranges of a Morton order of the live vertices over a 64^3 grid of the bounding box, cut at
   // equal vertex counts; each pass shifts the grid and turns its axes, so the next pass's regions hold the
   // last one's seams. Returns the vertices per region.
@@ -1643,8 +1644,8 @@ struct Decimator {
           continue;
         }
         bool out = false;
-        for_live_faces(static_cast<Index>(v), [&](const Face& f) {
-          for (Index w : f.v) out = out || ids[w] != r;
+        for_live_faces(static_cast<Index>(v), [&](Index f) {
+          for (Index w : faces[f].v) out = out || ids[w] != r;
         });
         outside[v] = out;
       }
@@ -1740,11 +1741,8 @@ struct Decimator {
     std::vector<std::uint32_t> ids(nv);
     const std::vector<std::uint64_t> per_region = assign_regions(pass, regions, ids);
 
-    // The collapses the targets ask for in all (one removes about one vertex and two faces), and this pass's
-    // part of them.
-    double needed = std::numeric_limits<double>::infinity();
-    if (target_f > 0) needed = std::min(needed, double(stats.input_faces - target_f) / 2);
-    if (target_v > 0) needed = std::min(needed, double(stats.input_vertices - target_v));
+    // The collapses the targets ask for in all, and this pass's part of them.
+    const double needed = collapses_needed();
     const double budget = kPassShare[pass] * needed - double(stats.collapses);
     const std::uint64_t faces0 = faces_alive, verts0 = verts_alive, boundary0 = boundary_edges;
     std::vector<std::unique_ptr<Decimator>> workers;
