@@ -18,6 +18,14 @@
 
 namespace ocsimp::decimate_detail {
 
+// True for record types that `resize` should leave unconstructed even though their members have default
+// values: aggregates of plain numbers (so operator new's storage already holds such objects) that the loop
+// filling the array right after sizing it writes in full. The vertex records are one: constructing them
+// zeroed their quadrics in a serial pass over the whole array, which below 8 MiB was also the first touch of
+// each page, so those page faults (about 1.6 us each on this VM) all fell on one core.
+template <class T>
+inline constexpr bool filled_after_resize = false;
+
 template <class T>
 struct BigAllocator {
   using value_type = T;
@@ -61,7 +69,8 @@ struct BigAllocator {
   // mesh).
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-    ::new (static_cast<void*>(p)) U;
+    static_assert(!filled_after_resize<U> || std::is_trivially_destructible_v<U>);
+    if constexpr (!filled_after_resize<U>) ::new (static_cast<void*>(p)) U;
   }
   template <class U, class... Args>
   void construct(U* p, Args&&... args) {

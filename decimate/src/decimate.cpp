@@ -120,6 +120,13 @@ struct alignas(64) Vertex {
   Quadric q;                   // relative to the local origin
 };
 static_assert(sizeof(Vertex) == 128);
+}  // namespace
+
+// build() writes every member of every vertex record (the face-list fields in build_face_lists).
+template <>
+inline constexpr bool decimate_detail::filled_after_resize<Vertex> = true;
+
+namespace {
 
 struct Face {
   Index v[3];           // v[0] == kNone: dead
@@ -378,8 +385,10 @@ struct Decimator {
     faces_alive = nf;
 
     // Vertices: positions, then face counts; faces: corners. The input arrays go as soon as they are copied.
+    // Chunks of a few thousand records: on a mesh of 35 k vertices and 70 k faces (bunny) larger ones left
+    // one core with most of the work and of the first touches of the pages.
     verts.resize(nv);
-    parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
+    parallel_chunks(nv, 4096, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = begin; v < end; ++v) {
         Vertex& x = verts[v];
         x.p[0] = m.positions[v].x();
@@ -397,7 +406,7 @@ struct Decimator {
     colors = std::move(m.colors);
     uvs = std::move(m.uvs);
     faces.resize(nf);
-    parallel_chunks(nf, 65536, [&](std::size_t begin, std::size_t end) {
+    parallel_chunks(nf, 8192, [&](std::size_t begin, std::size_t end) {
       for (std::size_t f = begin; f < end; ++f) {
         const Triangle& t = m.triangles[f];
         Face& face = faces[f];
@@ -456,7 +465,6 @@ struct Decimator {
   struct UpperSide {
     Index w, f;
     std::uint32_t slot;
-    bool operator<(const UpperSide& o) const { return w != o.w ? w < o.w : f < o.f; }
   };
 
   // Each undirected edge gets an id from its lower endpoint: vertex v numbers the distinct neighbours w > v
@@ -498,11 +506,12 @@ struct Decimator {
           if (next > v) sides[n++] = {next, f, std::uint32_t(c)};
           if (prev > v) sides[n++] = {prev, f, std::uint32_t((c + 2) % 3)};
         }
-        // Insertion sort: a vertex has a handful of sides.
+        // Insertion sort by w: a vertex has a handful of sides. The sort is stable and the face list is in
+        // face order (no collapse has run yet), so the sides of one edge stay in face order.
         for (std::size_t i = 1; i < n; ++i) {
           const UpperSide moving = sides[i];
           std::size_t j = i;
-          for (; j > 0 && moving < sides[j - 1]; --j) sides[j] = sides[j - 1];
+          for (; j > 0 && moving.w < sides[j - 1].w; --j) sides[j] = sides[j - 1];
           sides[j] = moving;
         }
         Index id = first_edge[v];
@@ -551,12 +560,22 @@ struct Decimator {
   void face_quadrics() {
     const std::size_t nf = faces.size();
     constexpr std::size_t grain = 1024;
-    // Up to this many faces, every face's plane is kept at once (80 bytes each, freed before the edges'
-    // costs are computed) and each vertex sums its own faces' planes through its face list, in face order as
-    // below: one pass over the corners instead of one per vertex range.
+    // Every face's plane at once (80 bytes each, freed before the edges' costs are computed), each vertex
+    // summing its own faces' planes through its face list, in face order as below: one pass over the corners
+    // instead of one per vertex range. Only when that array is big enough for the huge pages BigAllocator
+    // asks for, and up to 2^19 faces: smaller, it was fresh 4 KiB pages at every call, whose faults (about
+    // 1.6 us each on this VM) cost more than the blocks' repeated scans. This step, median of 5 runs: bunny
+    // (70 k faces) 7.9 -> 5.2 ms on one thread, horse (97 k) 6.5 -> 4.9 ms on two; igea (268 k, huge pages)
+    // took 26 ms in blocks against 10-14 ms at once.
     constexpr std::size_t kAllTermsFaces = std::size_t{1} << 19;
-    const bool all_at_once = nf <= kAllTermsFaces;
-    const std::size_t block = all_at_once ? std::max<std::size_t>(nf, 1) : 16384;
+    const bool all_at_once =
+        nf <= kAllTermsFaces &&
+        nf * sizeof(PlaneTerm) >= decimate_detail::BigAllocator<PlaneTerm>::min_huge_bytes;
+    // Blocks of 8 Ki faces (640 KiB of planes, within a core's L2) for small meshes; 16 Ki above, where twice
+    // as many parallel loops measured slower (gen1M, median of 5: 58.8 ms in 16 Ki blocks, 61.8 in 8 Ki).
+    const std::size_t block = all_at_once            ? std::max<std::size_t>(nf, 1)
+                              : nf <= kAllTermsFaces ? 8192
+                                                     : 16384;
     BigVector<PlaneTerm> terms(std::min(nf, block));
     const bool area = opt.area_weighting;
     // Two vertex ranges per core: every task scans the whole block, so more would only repeat that scan.
@@ -815,7 +834,7 @@ struct Decimator {
     return evaluate_inline(e, q, p, key, cost_out);
   }
 
-  // The key alone, for re-costs and setup (about 7 per collapse): inlined with the quadric and placement in
+  // The key alone, for setup and the first phase's queues: inlined with the quadric and placement in
   // locals, the compiler keeps them in registers instead of storing them for a caller that never reads them.
   std::uint32_t key_of_edge(Index e, float* key) const {
     Quadric q;
@@ -860,7 +879,11 @@ struct Decimator {
   void recost(Index e) {
     if (outside_region(e)) return;
     float key = 0;
-    const std::uint32_t state = key_of_edge(e, &key);
+    // Inlined here rather than through key_of_edge: the call's prologue and epilogue were about 0.7 % of a
+    // bunny decimation's instructions (callgrind, 450.6 M -> 447.4 M).
+    Quadric q;
+    Placement p;
+    const std::uint32_t state = evaluate_inline(e, &q, &p, &key, nullptr);
     if (state == 0) {
       if (in_heap(e)) {
         heap.update(e, key);
@@ -1556,6 +1579,14 @@ struct Decimator {
   static constexpr int kRounds = 6;
   static constexpr double kRoundPart = 0.6;
 
+  // Regions are cut from a Morton order of a 2^kRegionBits-cells-a-side grid (see assign_regions).
+  static constexpr int kRegionBits = 6;
+  static constexpr std::uint32_t kRegionCells = 1u << (3 * kRegionBits);
+  struct RegionScratch {
+    std::vector<std::uint32_t> ids;    // per vertex: its cell, then its region (see kOutside)
+    std::vector<std::uint32_t> cells;  // per cell: its vertex count, then its region
+  };
+
   static std::size_t region_count(std::uint64_t faces) {
     std::size_t k = kMinRegions;
     while (k < kMaxRegions && (k + k / 2) * kFacesPerRegion < faces) k *= 2;
@@ -1580,17 +1611,21 @@ struct Decimator {
     parallel_chunks(edges.size(), 65536, [&](std::size_t begin, std::size_t end) {
       for (std::size_t e = begin; e < end; ++e) edges[e].slot = kPending;
     });
-    for (int pass = 0; pass < kPasses; ++pass) run_pass(pass);
+    // The region arrays serve both passes (vertices are only ever renumbered downwards): allocated once,
+    // their pages are faulted in once.
+    RegionScratch scratch;
+    scratch.ids.resize(verts.size());
+    for (int pass = 0; pass < kPasses; ++pass) run_pass(pass, scratch);
   }
 
   // Regions are ranges of a Morton order of the live vertices over a 64^3 grid of the bounding box, cut at
   // equal vertex counts; each pass shifts the grid and turns its axes, so the next pass's regions hold the
   // last one's seams. Returns the vertices per region.
-  std::vector<std::uint64_t> assign_regions(int pass, std::size_t regions,
-                                            std::vector<std::uint32_t>& ids) const {
+  std::vector<std::uint64_t> assign_regions(int pass, std::size_t regions, RegionScratch& scratch) const {
     const std::size_t nv = verts.size();
-    constexpr int kBits = 6;
-    constexpr std::uint32_t kCells = 1u << (3 * kBits), kSide = 1u << kBits;
+    constexpr int kBits = kRegionBits;
+    constexpr std::uint32_t kCells = kRegionCells, kSide = 1u << kBits;
+    std::vector<std::uint32_t>& ids = scratch.ids;
     // Half a region's width, in cells, for a surface: a region covers about kSide^2 / regions cells of it.
     const double shift = pass == 0 ? 0.0 : 0.5 * kSide / std::sqrt(double(regions));
     const double scale = box_extent > 0 ? (kSide - shift) / box_extent : 0.0;
@@ -1614,24 +1649,27 @@ struct Decimator {
         ids[v] = code;
       }
     });
-    std::vector<std::uint32_t> cell_count(kCells + 1, 0);
-    for (std::size_t v = 0; v < nv; ++v) ++cell_count[ids[v]];
-    std::vector<std::uint32_t> cell_region(kCells + 1, kOutside);
+    // Vertices per cell, then, in place, each cell's region.
+    std::vector<std::uint32_t>& cells = scratch.cells;
+    cells.assign(kCells + 1, 0u);
+    for (std::size_t v = 0; v < nv; ++v) ++cells[ids[v]];
     std::vector<std::uint64_t> per_region(regions, 0);
     const std::uint64_t total = std::max<std::uint64_t>(1, verts_alive);
     std::uint64_t before = 0;
     for (std::uint32_t c = 0; c < kCells; ++c) {
-      if (cell_count[c] == 0) continue;  // no vertex reads it; most cells of a surface are empty
+      const std::uint32_t count = cells[c];
+      if (count == 0) continue;  // no vertex reads it; most cells of a surface are empty
       // A cell goes to the region its middle vertex falls in.
-      const std::uint64_t middle = before + cell_count[c] / 2;
+      const std::uint64_t middle = before + count / 2;
       const auto r =
           static_cast<std::uint32_t>(std::min<std::uint64_t>(regions - 1, middle * regions / total));
-      cell_region[c] = r;
-      per_region[r] += cell_count[c];
-      before += cell_count[c];
+      cells[c] = r;
+      per_region[r] += count;
+      before += count;
     }
+    cells[kCells] = kOutside;  // the vertices without faces
     parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = begin; v < end; ++v) ids[v] = cell_region[ids[v]];
+      for (std::size_t v = begin; v < end; ++v) ids[v] = cells[ids[v]];
     });
     // Interior: every vertex it shares a live face with is in its region. Marked in a second array, as the
     // first is read for the neighbours meanwhile.
@@ -1735,11 +1773,10 @@ struct Decimator {
   // pass runs in rounds: each round collapses, in every region, the pairs whose key is at most a threshold
   // taken from the keys then queued, so cheap pairs go first everywhere as in one global queue; a region
   // also stops at its share of the pass's collapses. The pass ends with the global queue rebuilt.
-  void run_pass(int pass) {
-    const std::size_t nv = verts.size();
+  void run_pass(int pass, RegionScratch& scratch) {
     const std::size_t regions = region_count(stats.input_faces);
-    std::vector<std::uint32_t> ids(nv);
-    const std::vector<std::uint64_t> per_region = assign_regions(pass, regions, ids);
+    const std::vector<std::uint64_t> per_region = assign_regions(pass, regions, scratch);
+    const std::vector<std::uint32_t>& ids = scratch.ids;
 
     // The collapses the targets ask for in all, and this pass's part of them.
     const double needed = collapses_needed();

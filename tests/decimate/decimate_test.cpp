@@ -630,6 +630,32 @@ TEST(Decimate, CarriedQuadricsEqualToFacePlanesChangeNothing) {
   }
 }
 
+// Without carried quadrics, each vertex starts with the area-weighted planes of its faces. The decimator
+// sums them in blocks of faces below 8 MiB of planes (about 105 k faces) and all at once above: both must
+// give every vertex its own faces' planes. No collapse runs, so the output quadrics are the starting ones.
+TEST(Decimate, StartingQuadricsAreTheFacePlanesAtEverySize) {
+  for (const auto& [rings, sides] : {std::pair{100, 200}, std::pair{200, 280}}) {  // 40 k and 112 k faces
+    const IndexedMesh mesh = torus(rings, sides);
+    DecimateOptions options = faces(mesh.face_count());
+    options.output_quadrics = true;
+    const DecimateResult result = run(mesh, options);
+    ASSERT_EQ(result.stats.collapses, 0u);
+    ASSERT_EQ(result.quadrics.size(), mesh.vertex_count());
+    const std::vector<Quadric> expected = face_quadrics_per_vertex(mesh);
+    for (std::size_t v = 0; v < expected.size(); ++v) {
+      const Quadric& e = expected[v];
+      const Quadric& got = result.quadrics[v];
+      const double scale = e.a00 + e.a11 + e.a22;
+      ASSERT_GT(scale, 0);
+      const double want[10] = {e.a00, e.a01, e.a02, e.a11, e.a12, e.a22, e.b0, e.b1, e.b2, e.c};
+      const double have[10] = {got.a00, got.a01, got.a02, got.a11, got.a12,
+                               got.a22, got.b0,  got.b1,  got.b2,  got.c};
+      for (int i = 0; i < 10; ++i)
+        ASSERT_NEAR(have[i], want[i], 1e-9 * scale) << "vertex " << v << " term " << i;
+    }
+  }
+}
+
 TEST(Decimate, CarriedQuadricsMeasureTheOriginalSurface) {
   // The mesh to decimate is flat, but its quadrics come from a bumped original with the same connectivity:
   // the decimator must place vertices against the original (off the flat plane), and keep more vertices where
