@@ -35,6 +35,7 @@
 #include <exception>
 #include <limits>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "cells.h"
@@ -57,11 +58,16 @@ std::uint64_t quantize(const Vec3d& local) {
     if (s >= static_cast<double>(kQuantumMax)) {
       v = kQuantumMax;
     } else if (s > 0.0) {
-      v = static_cast<std::uint64_t>(s + 0.5);
+      // Through a signed integer: s < 2^21, and converting to unsigned 64 bits costs a branch on x86-64.
+      v = static_cast<std::uint64_t>(static_cast<std::int64_t>(s + 0.5));
     }
     q |= v << (21 * a);
   }
   return q;
+}
+// Axis a's offset in quanta.
+std::int64_t quantum(std::uint64_t q, int a) {
+  return static_cast<std::int64_t>((q >> (21 * a)) & kQuantumMax);
 }
 // (Through int32: converting an unsigned 64-bit integer to double costs a branch on x86-64 before AVX-512.)
 Vec3d dequantize(std::uint64_t q) {
@@ -106,42 +112,57 @@ struct alignas(64) CellRecord {
 };
 static_assert(sizeof(CellRecord) == 128, "a cell record is two cache lines");
 
-// The cells' totals.
+// The cells' totals, in the arrays FineCells hands on, so that the pass ends without copying them into new
+// memory: every fresh page costs a fault, and this VM takes faults one at a time whatever the thread count
+// (about 70 ms for the 128 MB of 1 M cells' sums).
 struct CellStore {
-  std::vector<CellRecord> records;
+  std::vector<Quadric> quadrics;
+  std::vector<BorderSums> border;  // empty when an indexed pass keeps no border planes
   ZeroedVector<std::uint32_t> points;
   ZeroedVector<Vec3f> point_sum;
 
-  Quadric& quadric(std::uint32_t i) { return records[i].quadric; }
-  BorderSums& border(std::uint32_t i) { return records[i].border; }
   // Marks the cell as touched by a triangle, after its contribution is added. A touched cell's quadric has a
   // positive trace (every proper triangle adds its area to it); one touched only by zero-area triangles
   // carries the mark in the sign of its zero constant term instead of a byte of its own.
   void touch(std::uint32_t i) {
-    Quadric& q = records[i].quadric;
+    Quadric& q = quadrics[i];
     if (!(q.a00 + q.a11 + q.a22 > 0.0)) q.c = -0.0;
   }
   static bool touched(const Quadric& q) { return q.a00 + q.a11 + q.a22 > 0.0 || std::signbit(q.c); }
 
+  // Adds a chunk's partial sums to cell i.
+  void add(std::uint32_t i, const CellRecord& part) {
+    quadrics[i] += part.quadric;
+    if (border.empty()) return;
+    BorderSums& to = border[i];
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 4; ++c) to.slot[a][c] += part.border.slot[a][c];
+  }
+  CellRecord record(std::uint32_t i) const {
+    CellRecord r;
+    r.quadric = quadrics[i];
+    if (!border.empty()) r.border = border[i];
+    return r;
+  }
   void push_back() {
-    records.emplace_back();
+    quadrics.emplace_back();
+    border.emplace_back();
     points.push_back(0);
     point_sum.emplace_back(Vec3f::Zero());
   }
-  // Hands the sums over to `cells` in its layout (arrays per field).
+  // Hands the sums over to `cells`.
   void move_into(FineCells& cells, bool with_border) {
-    const std::size_t n = records.size();
-    cells.quadrics.resize(n);
-    if (with_border) cells.border.resize(n);
+    const std::size_t n = quadrics.size();
     cells.touched.resize(n);
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-      Quadric& q = records[i].quadric;
+      Quadric& q = quadrics[i];
       cells.touched[i] = touched(q) ? 1 : 0;
       if (q.c == 0.0) q.c = 0.0;  // drops the mark's sign
-      cells.quadrics[i] = q;
-      if (with_border) cells.border[i] = records[i].border;
     });
-    records = {};
+    cells.quadrics = std::move(quadrics);
+    quadrics = {};
+    if (with_border) cells.border = std::move(border);
+    border = {};
     cells.points = std::move(points);
     cells.point_sum = std::move(point_sum);
   }
@@ -153,8 +174,8 @@ struct CellStore {
 struct TriangleQuadric {
   double v[10];
   // `s` = 1 / (2 |c|).
-  TriangleQuadric(const Vec3d& c, double dc, double s) {
-    const double x = c.x(), y = c.y(), z = c.z();
+  TriangleQuadric(const Vec3d& c, double dc, double s) : TriangleQuadric(c.x(), c.y(), c.z(), dc, s) {}
+  TriangleQuadric(double x, double y, double z, double dc, double s) {
     const double sx = s * x, sy = s * y, sz = s * z, sd = s * dc;
     v[0] = sx * x;
     v[1] = sx * y;
@@ -167,7 +188,7 @@ struct TriangleQuadric {
     v[8] = sd * z;
     v[9] = sd * dc;
   }
-  void add_to(Quadric& q, int multiplicity) const {
+  [[gnu::always_inline]] void add_to(Quadric& q, int multiplicity) const {
     if (multiplicity == 1) {
       q.a00 += v[0], q.a01 += v[1], q.a02 += v[2], q.a11 += v[3], q.a12 += v[4], q.a22 += v[5];
       q.b0 += v[6], q.b1 += v[7], q.b2 += v[8], q.c += v[9];
@@ -378,6 +399,9 @@ bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions
                       if (over.load(std::memory_order_relaxed)) return;
                       KeySet set(std::size_t{1} << 13);
                       RecentCells recent;
+                      // A copy the compiler may keep in registers: the set's stores could alias the caller's.
+                      const Grid local_grid = grid;
+                      CellKey last = kNoKey;  // runs of vertices share a cell
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const Vec3d p = positions[i].cast<double>();
                         if (!p.allFinite()) {
@@ -386,7 +410,9 @@ bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions
                           }
                           continue;
                         }
-                        const CellKey key = grid.locate(p);
+                        const CellKey key = local_grid.locate(p);
+                        if (key == last) continue;
+                        last = key;
                         if (recent.find(key) == CellMap::kMissing) {
                           set.insert(key);
                           recent.remember(key, 0);
@@ -646,6 +672,78 @@ struct FaceChunk {
   void sort_by_cell() { table.sort_by_cell(); }
 };
 
+// A triangle of a face chunk whose corners lie in two or three cells, in scalars (Eigen's 3-vector
+// temporaries in `contribute` cost several times the arithmetic): the same operations in the same order as
+// `contribute`, so the same bits.
+struct Crossing {
+  double local[3][3];  // corners in their cells' frames
+  double p[3][3];      // corners in world units
+  double cross[3];     // (p1 - p0) x (p2 - p0)
+  double inverse_length;
+  std::uint32_t cell[3];   // the corners' cells
+  std::uint32_t index[3];  // and their numbers in the chunk
+};
+
+// Adds a border plane to a slot, the four floats in one vector add (each lane the scalar add's bits).
+using Float4 = float __attribute__((vector_size(16)));
+void add_plane(std::array<float, 4>& slot, Float4 plane) {
+  Float4 sum;
+  std::memcpy(&sum, slot.data(), sizeof sum);
+  sum += plane;
+  std::memcpy(slot.data(), &sum, sizeof sum);
+}
+
+void add_crossing(const Crossing& f, FaceChunk& chunk, double half_per_unit, bool boundary) {
+  const bool proper = f.inverse_length > 0.0;
+  const double(&c)[3] = f.cross;
+  const double dc = -((c[0] * f.p[0][0] + c[1] * f.p[0][1]) + c[2] * f.p[0][2]);
+  const TriangleQuadric q(c[0], c[1], c[2], dc, 0.5 * f.inverse_length);
+  const std::uint32_t(&cell)[3] = f.cell;
+  if (proper) {
+    // Each distinct cell once, with its corner count.
+    if (cell[0] == cell[1]) {
+      q.add_to(chunk.quadric(f.index[0]), 2);
+      q.add_to(chunk.quadric(f.index[2]), 1);
+    } else if (cell[1] == cell[2]) {
+      q.add_to(chunk.quadric(f.index[0]), 1);
+      q.add_to(chunk.quadric(f.index[1]), 2);
+    } else if (cell[2] == cell[0]) {
+      q.add_to(chunk.quadric(f.index[0]), 2);
+      q.add_to(chunk.quadric(f.index[1]), 1);
+    } else {
+      q.add_to(chunk.quadric(f.index[0]), 1);
+      q.add_to(chunk.quadric(f.index[1]), 1);
+      q.add_to(chunk.quadric(f.index[2]), 1);
+    }
+  }
+  if (!boundary || !proper) return;
+  const double n[3] = {c[0] * f.inverse_length, c[1] * f.inverse_length, c[2] * f.inverse_length};
+  for (int a = 0; a < 3; ++a) {
+    const int b = a == 2 ? 0 : a + 1;
+    if (cell[a] == cell[b]) continue;
+    const double e[3] = {f.p[b][0] - f.p[a][0], f.p[b][1] - f.p[a][1], f.p[b][2] - f.p[a][2]};
+    const double e_squared = (e[0] * e[0] + e[1] * e[1]) + e[2] * e[2];
+    if (!(e_squared > 0.0)) continue;
+    const double r = 1.0 / std::sqrt(e_squared);
+    const double m[3] = {(e[1] * n[2] - e[2] * n[1]) * r, (e[2] * n[0] - e[0] * n[2]) * r,
+                         (e[0] * n[1] - e[1] * n[0]) * r};
+    const double half[3] = {half_per_unit * e[0], half_per_unit * e[1], half_per_unit * e[2]};
+    const double ax = std::abs(e[0]), ay = std::abs(e[1]), az = std::abs(e[2]);
+    const int slot = ax >= ay && ax >= az ? 0 : (ay >= az ? 1 : 2);
+    const float mx = static_cast<float>(m[0]), my = static_cast<float>(m[1]), mz = static_cast<float>(m[2]);
+    const double(&la)[3] = f.local[a];
+    const double(&lb)[3] = f.local[b];
+    add_plane(chunk.border(f.index[a]).slot[slot],
+              Float4{mx, my, mz,
+                     static_cast<float>(-((m[0] * (la[0] + half[0]) + m[1] * (la[1] + half[1])) +
+                                          m[2] * (la[2] + half[2])))});
+    add_plane(chunk.border(f.index[b]).slot[slot],
+              Float4{mx, my, mz,
+                     static_cast<float>(-((m[0] * (lb[0] - half[0]) + m[1] * (lb[1] - half[1])) +
+                                          m[2] * (lb[2] - half[2])))});
+  }
+}
+
 // One chunk of vertices: partial sums of what is averaged per cell.
 struct PointChunk {
   ChunkTable<std::uint32_t> table;
@@ -711,26 +809,41 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   tbb::parallel_for(std::size_t{0}, count, [&](std::size_t i) { cells.keys[i] = key_of_morton(codes[i]); });
   codes = {};
 
-  // Vertex pass: resolve each vertex's cell once and pack it, with the vertex's offset inside the cell, into
-  // the vertex's own 12 bytes. Each vertex is read and written by the same task.
+  // The face pass's quadric sums take their fresh pages (faults, which this VM serves one at a time) on
+  // another thread while this one builds the key -> cell map, in about the same time; the border sums wait
+  // for the map to go, so that the two never add to the memory peak together.
+  CellStore store;
   {
+    tbb::task_group allocate;
+    allocate.run([&] { store.quadrics.resize(count); });
     CellMap map(count);
     bool inserted;
     for (std::size_t i = 0; i < count; ++i)
       map.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);
+    allocate.wait();
+    // Vertex pass: resolve each vertex's cell once and pack it, with the vertex's offset inside the cell,
+    // into the vertex's own 12 bytes. Each vertex is read and written by the same task.
     constexpr std::size_t kChunk = 1 << 20;
     for (std::size_t start = 0; start < vertex_count; start += kChunk) {
       const std::size_t end = std::min(vertex_count, start + kChunk);
       tbb::parallel_for(tbb::blocked_range<std::size_t>(start, end, 1 << 18),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           RecentCells recent;
+                          // A copy the compiler may keep in registers: the packed stores could alias the
+                          // caller's.
+                          const Grid local_grid = grid;
+                          CellKey last_key = kNoKey;  // runs of vertices share a cell
+                          std::uint32_t cell = 0;
                           for (std::size_t v = r.begin(); v != r.end(); ++v) {
                             Vec3d local;
-                            const CellKey key = grid.locate(positions[v].cast<double>(), local);
-                            std::uint32_t cell = recent.find(key);
-                            if (cell == CellMap::kMissing) {
-                              cell = map.find(key);
-                              recent.remember(key, cell);
+                            const CellKey key = local_grid.locate(positions[v].cast<double>(), local);
+                            if (key != last_key) {
+                              last_key = key;
+                              cell = recent.find(key);
+                              if (cell == CellMap::kMissing) {
+                                cell = map.find(key);
+                                recent.remember(key, cell);
+                              }
                             }
                             pack(positions[v], cell, quantize(local));
                           }
@@ -744,9 +857,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // pages back before the face pass, the memory peak, allocates its own.
   malloc_trim(0);
 #endif
+  if (options.boundary) store.border.resize(count);
   // Face pass, in fixed chunks of each batch (see the top of this file).
-  CellStore store;
-  store.records.resize(count);
   // About two distinct triangles per cell on a closed surface; repeats are few when cells are much larger
   // than triangles.
   TriangleBuffer triangles(count * 23 / 10, 16);
@@ -759,46 +871,60 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     const std::size_t begin = j * kChunkTriangles, end = std::min(batch.size(), begin + kChunkTriangles);
     // The corners first, in a loop of independent loads: they are random reads into the vertex array, and
     // many of them then wait on memory at once instead of one per triangle.
-    chunk.gathered.resize(end - begin);
-    for (std::size_t i = begin; i < end; ++i) {
-      const Triangle& t = batch[i];
-      FaceChunk::Corners& g = chunk.gathered[i - begin];
-      for (int k = 0; k < 3; ++k) {
-        if (t[k] >= vertex_count) {
-          throw Error(
-              path, {},
-              "a triangle refers to vertex " + std::to_string(t[k]) + " of " + std::to_string(vertex_count));
-        }
-        unpack(packed[t[k]], g.cell[k], g.q[k]);
+    const std::size_t size = end - begin;
+    chunk.gathered.resize(size);
+    FaceChunk::Corners* gathered = chunk.gathered.data();
+    const Triangle* triangles_in = batch.data() + begin;
+    for (std::size_t i = 0; i < size; ++i) {
+      const Triangle& t = triangles_in[i];
+      const Index largest = std::max(t[0], std::max(t[1], t[2]));
+      if (largest >= vertex_count) [[unlikely]] {
+        throw Error(
+            path, {},
+            "a triangle refers to vertex " + std::to_string(largest) + " of " + std::to_string(vertex_count));
       }
+      FaceChunk::Corners& g = gathered[i];
+      for (int k = 0; k < 3; ++k) unpack(packed[t[k]], g.cell[k], g.q[k]);
     }
     // Then in phases over the chunk, each a loop of independent steps: a triangle's square root and
     // division would otherwise stall its own dependency chain.
     std::vector<FaceChunk::Flat>& flats = chunk.flats;
     std::vector<std::uint32_t>& crossing = chunk.crossing;
-    flats.clear();
+    // Only grows: every entry in use is written before it is read, and clearing it per chunk cost a memset.
+    if (flats.size() < size) flats.resize(size);
     crossing.clear();
+    FaceChunk::Flat* flat = flats.data();
     const double area_unit = grid.cell * grid.cell;
-    for (std::uint32_t i = 0; i < chunk.gathered.size(); ++i) {
-      const FaceChunk::Corners& g = chunk.gathered[i];
+    for (std::uint32_t i = 0; i < size; ++i) {
+      const FaceChunk::Corners& g = gathered[i];
       const std::uint32_t(&cell)[3] = g.cell;
       if (cell[0] == cell[1] && cell[1] == cell[2]) {
         // Most triangles lie inside one cell: one key, no border crossing, no survivor. In cell units the
         // corners are small numbers: the cross product loses nothing to cancellation.
         // In scalars: Eigen's 3-vector temporaries here were stored as two halves and reloaded as one
         // packet, a store-forwarding stall that took about a tenth of this loop's time.
-        FaceChunk::Flat& f = flats.emplace_back();
+        FaceChunk::Flat& f = *flat++;
         f.slot = chunk.slot(cell[0], cells.keys, grid);
-        const Vec3d l0 = dequantize(g.q[0]), l1 = dequantize(g.q[1]), l2 = dequantize(g.q[2]);
-        const double ax = l1.x() - l0.x(), ay = l1.y() - l0.y(), az = l1.z() - l0.z();
-        const double bx = l2.x() - l0.x(), by = l2.y() - l0.y(), bz = l2.z() - l0.z();
-        const double cx = area_unit * (ay * bz - az * by);
-        const double cy = area_unit * (az * bx - ax * bz);
-        const double cz = area_unit * (ax * by - ay * bx);
+        // The cross product in quanta, exactly, in integers: every difference and product of two quantized
+        // offsets is exact in double as well, so this is bit for bit what the same formula gives on the
+        // dequantized offsets (but for the sign of a zero, which no sum keeps), with three conversions
+        // instead of nine.
+        const std::int64_t x0 = quantum(g.q[0], 0), y0 = quantum(g.q[0], 1), z0 = quantum(g.q[0], 2);
+        const std::int64_t ax = quantum(g.q[1], 0) - x0, ay = quantum(g.q[1], 1) - y0,
+                           az = quantum(g.q[1], 2) - z0;
+        const std::int64_t bx = quantum(g.q[2], 0) - x0, by = quantum(g.q[2], 1) - y0,
+                           bz = quantum(g.q[2], 2) - z0;
+        constexpr double kArea = 1.0 / (kQuantum * kQuantum);
+        const double cx = area_unit * (static_cast<double>(ay * bz - az * by) * kArea);
+        const double cy = area_unit * (static_cast<double>(az * bx - ax * bz) * kArea);
+        const double cz = area_unit * (static_cast<double>(ax * by - ay * bx) * kArea);
         f.cross[0] = cx, f.cross[1] = cy, f.cross[2] = cz;
         const Vec3d& o = chunk.origin(f.slot);
-        f.offset = -(cx * (o.x() + grid.cell * l0.x()) + cy * (o.y() + grid.cell * l0.y()) +
-                     cz * (o.z() + grid.cell * l0.z()));
+        const double l0x = static_cast<double>(x0) * (1.0 / kQuantum),
+                     l0y = static_cast<double>(y0) * (1.0 / kQuantum),
+                     l0z = static_cast<double>(z0) * (1.0 / kQuantum);
+        f.offset = -(cx * (o.x() + grid.cell * l0x) + cy * (o.y() + grid.cell * l0y) +
+                     cz * (o.z() + grid.cell * l0z));
         continue;
       }
       crossing.push_back(i);
@@ -807,33 +933,58 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         ++chunk.survived;
       }
     }
-    for (FaceChunk::Flat& f : flats) {
+    const std::span<FaceChunk::Flat> in_one_cell(flats.data(), flat);
+    for (FaceChunk::Flat& f : in_one_cell) {
       f.squared = f.cross[0] * f.cross[0] + f.cross[1] * f.cross[1] + f.cross[2] * f.cross[2];
       f.scale = 0.5 / std::sqrt(f.squared);
     }
-    for (const FaceChunk::Flat& f : flats) {
-      if (f.squared > 0.0 && f.squared <= std::numeric_limits<double>::max()) {
-        TriangleQuadric(Vec3d(f.cross[0], f.cross[1], f.cross[2]), f.offset, f.scale)
-            .add_to(chunk.quadric(f.slot), 3);
+    {
+      // Runs of triangles in one cell add to a quadric held in registers (the same additions in the same
+      // order), stored when the cell changes.
+      std::uint32_t current = ~std::uint32_t{0};
+      Quadric sum;
+      for (const FaceChunk::Flat& f : in_one_cell) {
+        if (!(f.squared > 0.0 && f.squared <= std::numeric_limits<double>::max())) continue;
+        if (f.slot != current) {
+          if (current != ~std::uint32_t{0}) chunk.quadric(current) = sum;
+          current = f.slot;
+          sum = chunk.quadric(current);
+        }
+        TriangleQuadric(f.cross[0], f.cross[1], f.cross[2], f.offset, f.scale).add_to(sum, 3);
       }
+      if (current != ~std::uint32_t{0}) chunk.quadric(current) = sum;
     }
     constexpr std::size_t kBlock = 64;
-    Facet facets[kBlock];
+    Crossing facets[kBlock];
+    const double half_per_unit = 0.5 * grid.inverse_cell;
     for (std::size_t start = 0; start < crossing.size(); start += kBlock) {
       const int m = static_cast<int>(std::min(kBlock, crossing.size() - start));
       for (int b = 0; b < m; ++b) {
-        const FaceChunk::Corners& g = chunk.gathered[crossing[start + b]];
-        Facet& f = facets[b];
+        const FaceChunk::Corners& g = gathered[crossing[start + b]];
+        Crossing& f = facets[b];
         for (int k = 0; k < 3; ++k) {
+          f.cell[k] = g.cell[k];
           f.index[k] = chunk.slot(g.cell[k], cells.keys, grid);
-          f.key[k] = chunk.key(f.index[k]);
-          f.local[k] = dequantize(g.q[k]);
-          f.p[k] = chunk.origin(f.index[k]) + grid.cell * f.local[k];
+          const Vec3d& o = chunk.origin(f.index[k]);
+          for (int a = 0; a < 3; ++a) {
+            f.local[k][a] = static_cast<double>(quantum(g.q[k], a)) * (1.0 / kQuantum);
+            f.p[k][a] = o[a] + grid.cell * f.local[k][a];
+          }
         }
-        f.set_normal();
+        const double ux = f.p[1][0] - f.p[0][0], uy = f.p[1][1] - f.p[0][1], uz = f.p[1][2] - f.p[0][2];
+        const double vx = f.p[2][0] - f.p[0][0], vy = f.p[2][1] - f.p[0][1], vz = f.p[2][2] - f.p[0][2];
+        f.cross[0] = uy * vz - uz * vy;
+        f.cross[1] = uz * vx - ux * vz;
+        f.cross[2] = ux * vy - uy * vx;
       }
-      set_inverse_lengths(facets, m);
-      for (int b = 0; b < m; ++b) contribute(facets[b], chunk, grid, options.boundary);
+      // 1 / |cross| apart from the rest, as in set_inverse_lengths.
+      for (int b = 0; b < m; ++b) {
+        const double(&c)[3] = facets[b].cross;
+        const double squared = (c[0] * c[0] + c[1] * c[1]) + c[2] * c[2];
+        const bool proper = squared > 0.0 && squared <= std::numeric_limits<double>::max();
+        facets[b].inverse_length = proper ? 1.0 / std::sqrt(squared) : 0.0;
+      }
+      for (int b = 0; b < m; ++b) add_crossing(facets[b], chunk, half_per_unit, options.boundary);
     }
     chunk.sort_by_cell();
   };
@@ -846,10 +997,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     }
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) { process(batch.triangles, j); });
     merge_chunks(chunks.data(), n, count, [&](const FaceChunk& chunk, std::uint32_t s, std::uint32_t cell) {
-      CellRecord& to = store.records[cell];
-      to.quadric += chunk.records[s].quadric;
-      for (int a = 0; a < 3; ++a)
-        for (int c = 0; c < 4; ++c) to.border.slot[a][c] += chunk.records[s].border.slot[a][c];
+      store.add(cell, chunk.records[s]);
       store.touch(cell);
     });
     for (std::size_t j = 0; j < n; ++j) cells.surviving_instances += chunks[j].survived;
@@ -880,6 +1028,39 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
       PointChunk& chunk = point_chunks[j];
       chunk.clear();
       const std::size_t first = start + j * kChunkVertices, last = std::min(end, first + kChunkVertices);
+      if (!normals && !colors && !uvs) {
+        // Positions only, the common case, in a loop of its own: a run of vertices in one cell adds to a
+        // sum held in registers (the same additions in the same order), stored when the cell changes.
+        std::uint32_t current = ~std::uint32_t{0}, s = 0, count_in_run = 0;
+        float sx = 0, sy = 0, sz = 0;
+        auto flush = [&] {
+          if (current == ~std::uint32_t{0}) return;
+          chunk.points[s] += count_in_run;
+          chunk.point_sum[s] = Vec3f(sx, sy, sz);
+        };
+        for (std::size_t v = first; v < last; ++v) {
+          std::uint32_t cell;
+          std::uint64_t q;
+          unpack(packed[v], cell, q);
+          if (cell != current) {
+            flush();
+            current = cell;
+            s = chunk.slot(cell, false, false, false);
+            count_in_run = 0;
+            const Vec3f& sum = chunk.point_sum[s];
+            sx = sum.x(), sy = sum.y(), sz = sum.z();
+          }
+          ++count_in_run;
+          // An offset in quanta is exact in float, and so is its scaling: the bits of dequantize()'s value
+          // rounded to float.
+          sx += static_cast<float>(quantum(q, 0)) * static_cast<float>(1.0 / kQuantum);
+          sy += static_cast<float>(quantum(q, 1)) * static_cast<float>(1.0 / kQuantum);
+          sz += static_cast<float>(quantum(q, 2)) * static_cast<float>(1.0 / kQuantum);
+        }
+        flush();
+        chunk.sort_by_cell();
+        return;
+      }
       for (std::size_t v = first; v < last; ++v) {
         std::uint32_t cell;
         std::uint64_t q;
@@ -976,10 +1157,7 @@ struct SoupCells {
   // Adds partial sums to cell i; `touched`: some triangle touched the part.
   void add(std::uint32_t i, const CellRecord& part, bool touched, std::uint32_t points,
            const Vec3f& point_sum) {
-    CellRecord& to = store.records[i];
-    to.quadric += part.quadric;
-    for (int a = 0; a < 3; ++a)
-      for (int c = 0; c < 4; ++c) to.border.slot[a][c] += part.border.slot[a][c];
+    store.add(i, part);
     if (touched) store.touch(i);
     // A cell's mean stays that of the points counted, should its count ever saturate.
     if (store.points[i] <= std::numeric_limits<std::uint32_t>::max() - points) {
@@ -1003,7 +1181,7 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
     const auto c = key_coords(cells.keys[i]);
     const Vec3f offset(static_cast<float>(c[0] & 1), static_cast<float>(c[1] & 1),
                        static_cast<float>(c[2] & 1));
-    CellRecord part = cells.store.records[i];
+    CellRecord part = cells.store.record(static_cast<std::uint32_t>(i));
     // A plane m.x + d = 0 in the child's cell units is m.x' + (d - m.offset) / 2 = 0 in the parent's.
     for (std::array<float, 4>& t : part.border.slot) {
       t[3] = 0.5f * (t[3] - (t[0] * offset.x() + t[1] * offset.y() + t[2] * offset.z()));
@@ -1099,14 +1277,16 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   tbb::parallel_sort(entries.begin(), entries.end());
   cells.keys.resize(count);
   CellStore sorted;
-  sorted.records.resize(count);
+  sorted.quadrics.resize(count);
+  sorted.border.resize(count);
   sorted.points.resize(count);
   sorted.point_sum.resize(count);
   CellMap numbering(count);
   for (std::size_t i = 0; i < count; ++i) {
     const std::uint32_t from = entries[i].second;
     cells.keys[i] = keys[from];
-    sorted.records[i] = store.records[from];
+    sorted.quadrics[i] = store.quadrics[from];
+    sorted.border[i] = store.border[from];
     sorted.points[i] = store.points[from];
     sorted.point_sum[i] = store.point_sum[from];
     bool inserted;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -644,6 +645,46 @@ TEST(Cluster, SoupAndIndexedInputAgree) {
     worst = std::max<double>(worst, (indexed.mesh.positions[v] - soup.mesh.positions[v]).norm());
   }
   EXPECT_LT(worst, 0.05 * stats.output_cell_size);
+}
+
+// An indexed pass adds the triangles that cross cells from the quantized corners in scalar code of its own; a
+// soup pass adds them from the corners as read, through the general code. Every sum is the same up to the
+// quantization (2^-21 of a cell), borders included: carried in the quadrics, they show in the output.
+TEST(Cluster, IndexedAndSoupPassesAddCrossingTrianglesAlike) {
+  const IndexedMesh mesh = tilted(lumpy_sphere_with_holes());
+  for (int boundary = 0; boundary < 2; ++boundary) {
+    ClusterOptions options = grid_options(14);
+    options.preserve_boundary = boundary == 1;
+    options.border_in_quadrics = boundary == 1;
+    const QuadricMesh indexed = run(mesh, options);
+    const QuadricMesh soup = run(mesh, options, nullptr, true);
+    ASSERT_EQ(indexed.mesh.triangles, soup.mesh.triangles);
+    ASSERT_EQ(indexed.quadrics.size(), soup.quadrics.size());
+    options.border_in_quadrics = false;
+    const QuadricMesh surface_only = run(mesh, options);
+    std::size_t with_border = 0;
+    for (std::size_t v = 0; v < indexed.quadrics.size(); ++v) {
+      const auto coefficients = [](const Quadric& q) {
+        return std::array<double, 10>{q.a00, q.a01, q.a02, q.a11, q.a12, q.a22, q.b0, q.b1, q.b2, q.c};
+      };
+      const std::array<double, 10> a = coefficients(indexed.quadrics[v]), b = coefficients(soup.quadrics[v]),
+                                   plain = coefficients(surface_only.quadrics[v]);
+      double scale = 0, gap = 0, border = 0;
+      for (int k = 0; k < 10; ++k) {
+        scale = std::max(scale, std::abs(a[k]));
+        gap = std::max(gap, std::abs(a[k] - b[k]));
+        border = std::max(border, std::abs(a[k] - plain[k]));
+      }
+      EXPECT_LE(gap, 1e-5 * scale) << v;
+      if (border > 1e-2 * scale) ++with_border;
+    }
+    // The holes' borders run through many cells, whose quadrics the border planes change.
+    if (boundary == 1) {
+      EXPECT_GT(with_border, 20u);
+    } else {
+      EXPECT_EQ(with_border, 0u);
+    }
+  }
 }
 
 // A soup gives no vertex array to count cells on before the pass, so the pass starts from a guess and halves
