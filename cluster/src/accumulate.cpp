@@ -201,77 +201,6 @@ struct TriangleQuadric {
   }
 };
 
-int dominant_axis(const Vec3d& e) {
-  const double x = std::abs(e.x()), y = std::abs(e.y()), z = std::abs(e.z());
-  if (x >= y && x >= z) return 0;
-  return y >= z ? 1 : 2;
-}
-
-// One triangle as a chunk sees it: corners, their cells, and the triangle's normal.
-struct Facet {
-  Vec3d p[3];      // corner positions
-  Vec3d local[3];  // corner positions in their cells' frames (cell units from each cell's lower corner)
-  CellKey key[3];
-  std::uint32_t index[3];  // the corners' cells in the chunk's numbering
-  Vec3d cross;             // (p1 - p0) x (p2 - p0)
-  double inverse_length;   // 1 / |cross|, 0 for a degenerate triangle
-
-  void set_normal() { cross = (p[1] - p[0]).cross(p[2] - p[0]); }
-};
-
-// 1 / |cross| for a block of facets, apart from the rest of the work: the square roots and divisions
-// pipeline back to back instead of each stalling a triangle's dependency chain.
-void set_inverse_lengths(Facet* facets, int count) {
-  for (int i = 0; i < count; ++i) {
-    const double squared = facets[i].cross.squaredNorm();
-    const bool proper = squared > 0.0 && squared <= std::numeric_limits<double>::max();
-    facets[i].inverse_length = proper ? 1.0 / std::sqrt(squared) : 0.0;
-  }
-}
-
-// Adds one triangle to its corners' cells.
-template <class Store>
-void contribute(const Facet& f, Store& store, const Grid& grid, bool boundary) {
-  // A zero-area triangle adds no quadric (and no border planes: it has no normal), but still touches.
-  const bool proper = f.inverse_length > 0.0;
-  const TriangleQuadric q(f.cross, -f.cross.dot(f.p[0]), 0.5 * f.inverse_length);
-  for (int k = 0; k < 3; ++k) {
-    // Each distinct cell once, with its corner count.
-    if ((k >= 1 && f.key[k] == f.key[0]) || (k == 2 && f.key[2] == f.key[1])) continue;
-    int multiplicity = 1;
-    for (int j = k + 1; j < 3; ++j) multiplicity += f.key[j] == f.key[k];
-    const std::uint32_t i = f.index[k];
-    if (proper) q.add_to(store.quadric(i), multiplicity);
-    store.touch(i);
-  }
-  if (!boundary || !proper) return;
-  const Vec3d n = f.cross * f.inverse_length;
-  for (int k = 0; k < 3; ++k) {
-    const int a = k, b = k == 2 ? 0 : k + 1;
-    if (f.key[a] == f.key[b]) continue;
-    // The two half-edges of an interior edge compute e with exactly opposite bits and the midpoint in each
-    // end's frame with exactly equal bits, so their planes cancel up to the difference of the two
-    // triangles' normals.
-    const Vec3d e = f.p[b] - f.p[a];
-    const double e_squared = e.squaredNorm();
-    if (!(e_squared > 0.0)) continue;
-    const Vec3d m = e.cross(n) * (1.0 / std::sqrt(e_squared));
-    const Vec3d half = (0.5 * grid.inverse_cell) * e;
-    const int slot = dominant_axis(e);
-    const Vec3f mf = m.cast<float>();
-    {
-      std::array<float, 4>& s = store.border(f.index[a]).slot[slot];
-      s[0] += mf.x(), s[1] += mf.y(), s[2] += mf.z();
-      s[3] += static_cast<float>(-m.dot(f.local[a] + half));
-    }
-    {
-      std::array<float, 4>& s = store.border(f.index[b]).slot[slot];
-      s[0] += mf.x(), s[1] += mf.y(), s[2] += mf.z();
-      s[3] += static_cast<float>(-m.dot(f.local[b] - half));
-    }
-  }
-}
-
 // One chunk slot's overflowing surviving triangles: appended as they come (a hash set would cost a cache miss
 // per triangle in the face loop), sorted and merged whenever the log fills, so memory stays proportional to
 // the distinct triangles however often they repeat.
@@ -661,7 +590,6 @@ struct FaceChunk {
   const Vec3d& origin(std::uint32_t s) const { return origins[s]; }
   Quadric& quadric(std::uint32_t s) { return records[s].quadric; }
   BorderSums& border(std::uint32_t s) { return records[s].border; }
-  void touch(std::uint32_t) {}  // every cell of a chunk is touched; merging marks it
   void clear() {
     table.clear();
     records.clear();
@@ -672,17 +600,34 @@ struct FaceChunk {
   void sort_by_cell() { table.sort_by_cell(); }
 };
 
-// A triangle of a face chunk whose corners lie in two or three cells, in scalars (Eigen's 3-vector
-// temporaries in `contribute` cost several times the arithmetic): the same operations in the same order as
-// `contribute`, so the same bits.
-struct Crossing {
-  double local[3][3];  // corners in their cells' frames
-  double p[3][3];      // corners in world units
-  double cross[3];     // (p1 - p0) x (p2 - p0)
-  double inverse_length;
-  std::uint32_t cell[3];   // the corners' cells
-  std::uint32_t index[3];  // and their numbers in the chunk
+// One triangle as a chunk sees it, in scalars: Eigen's 3-vector temporaries cost several times the
+// arithmetic on this path (every triangle of a soup, every crossing triangle of an indexed input).
+struct Facet {
+  double local[3][3];      // corners in their cells' frames (cell units from each cell's lower corner)
+  double p[3][3];          // corners in world units
+  double cross[3];         // (p1 - p0) x (p2 - p0)
+  double inverse_length;   // 1 / |cross|, 0 for a degenerate triangle
+  std::uint32_t index[3];  // the corners' cells in the chunk's numbering
+
+  void set_cross() {
+    const double ux = p[1][0] - p[0][0], uy = p[1][1] - p[0][1], uz = p[1][2] - p[0][2];
+    const double vx = p[2][0] - p[0][0], vy = p[2][1] - p[0][1], vz = p[2][2] - p[0][2];
+    cross[0] = uy * vz - uz * vy;
+    cross[1] = uz * vx - ux * vz;
+    cross[2] = ux * vy - uy * vx;
+  }
 };
+
+// 1 / |cross| for a block of facets, apart from the rest of the work: the square roots and divisions
+// pipeline back to back instead of each stalling a triangle's dependency chain.
+void set_inverse_lengths(Facet* facets, int count) {
+  for (int i = 0; i < count; ++i) {
+    const double(&c)[3] = facets[i].cross;
+    const double squared = (c[0] * c[0] + c[1] * c[1]) + c[2] * c[2];
+    const bool proper = squared > 0.0 && squared <= std::numeric_limits<double>::max();
+    facets[i].inverse_length = proper ? 1.0 / std::sqrt(squared) : 0.0;
+  }
+}
 
 // Adds a border plane to a slot, the four floats in one vector add (each lane the scalar add's bits).
 using Float4 = float __attribute__((vector_size(16)));
@@ -693,15 +638,21 @@ void add_plane(std::array<float, 4>& slot, Float4 plane) {
   std::memcpy(slot.data(), &sum, sizeof sum);
 }
 
-void add_crossing(const Crossing& f, FaceChunk& chunk, double half_per_unit, bool boundary) {
+// Adds one triangle to its corners' cells: its plane quadric, and the border planes of its edges between two
+// cells. `half_per_unit` is half the inverse cell size.
+template <class Chunk>
+void contribute(const Facet& f, Chunk& chunk, double half_per_unit, bool boundary) {
+  // A zero-area triangle adds no quadric (and no border planes: it has no normal).
   const bool proper = f.inverse_length > 0.0;
   const double(&c)[3] = f.cross;
   const double dc = -((c[0] * f.p[0][0] + c[1] * f.p[0][1]) + c[2] * f.p[0][2]);
   const TriangleQuadric q(c[0], c[1], c[2], dc, 0.5 * f.inverse_length);
-  const std::uint32_t(&cell)[3] = f.cell;
+  const std::uint32_t(&cell)[3] = f.index;
   if (proper) {
     // Each distinct cell once, with its corner count.
-    if (cell[0] == cell[1]) {
+    if (cell[0] == cell[1] && cell[1] == cell[2]) {
+      q.add_to(chunk.quadric(f.index[0]), 3);
+    } else if (cell[0] == cell[1]) {
       q.add_to(chunk.quadric(f.index[0]), 2);
       q.add_to(chunk.quadric(f.index[2]), 1);
     } else if (cell[1] == cell[2]) {
@@ -721,6 +672,9 @@ void add_crossing(const Crossing& f, FaceChunk& chunk, double half_per_unit, boo
   for (int a = 0; a < 3; ++a) {
     const int b = a == 2 ? 0 : a + 1;
     if (cell[a] == cell[b]) continue;
+    // The two half-edges of an interior edge compute e with exactly opposite bits and the midpoint in each
+    // end's frame with exactly equal bits, so their planes cancel up to the difference of the two
+    // triangles' normals.
     const double e[3] = {f.p[b][0] - f.p[a][0], f.p[b][1] - f.p[a][1], f.p[b][2] - f.p[a][2]};
     const double e_squared = (e[0] * e[0] + e[1] * e[1]) + e[2] * e[2];
     if (!(e_squared > 0.0)) continue;
@@ -955,15 +909,14 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
       if (current != ~std::uint32_t{0}) chunk.quadric(current) = sum;
     }
     constexpr std::size_t kBlock = 64;
-    Crossing facets[kBlock];
+    Facet facets[kBlock];
     const double half_per_unit = 0.5 * grid.inverse_cell;
     for (std::size_t start = 0; start < crossing.size(); start += kBlock) {
       const int m = static_cast<int>(std::min(kBlock, crossing.size() - start));
       for (int b = 0; b < m; ++b) {
         const FaceChunk::Corners& g = gathered[crossing[start + b]];
-        Crossing& f = facets[b];
+        Facet& f = facets[b];
         for (int k = 0; k < 3; ++k) {
-          f.cell[k] = g.cell[k];
           f.index[k] = chunk.slot(g.cell[k], cells.keys, grid);
           const Vec3d& o = chunk.origin(f.index[k]);
           for (int a = 0; a < 3; ++a) {
@@ -971,20 +924,10 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
             f.p[k][a] = o[a] + grid.cell * f.local[k][a];
           }
         }
-        const double ux = f.p[1][0] - f.p[0][0], uy = f.p[1][1] - f.p[0][1], uz = f.p[1][2] - f.p[0][2];
-        const double vx = f.p[2][0] - f.p[0][0], vy = f.p[2][1] - f.p[0][1], vz = f.p[2][2] - f.p[0][2];
-        f.cross[0] = uy * vz - uz * vy;
-        f.cross[1] = uz * vx - ux * vz;
-        f.cross[2] = ux * vy - uy * vx;
+        f.set_cross();
       }
-      // 1 / |cross| apart from the rest, as in set_inverse_lengths.
-      for (int b = 0; b < m; ++b) {
-        const double(&c)[3] = facets[b].cross;
-        const double squared = (c[0] * c[0] + c[1] * c[1]) + c[2] * c[2];
-        const bool proper = squared > 0.0 && squared <= std::numeric_limits<double>::max();
-        facets[b].inverse_length = proper ? 1.0 / std::sqrt(squared) : 0.0;
-      }
-      for (int b = 0; b < m; ++b) add_crossing(facets[b], chunk, half_per_unit, options.boundary);
+      set_inverse_lengths(facets, m);
+      for (int b = 0; b < m; ++b) contribute(facets[b], chunk, half_per_unit, options.boundary);
     }
     chunk.sort_by_cell();
   };
@@ -1127,7 +1070,6 @@ struct SoupChunk {
   }
   Quadric& quadric(std::uint32_t s) { return records[s].quadric; }
   BorderSums& border(std::uint32_t s) { return records[s].border; }
-  void touch(std::uint32_t) {}  // every cell of a chunk is touched; merging marks it
   void clear() {
     table.clear();
     records.clear();
@@ -1223,6 +1165,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     }
     const std::size_t n = (batch.corners.size() + kChunkTriangles - 1) / kChunkTriangles;
     if (chunks.size() < n) chunks.resize(n);
+    const double half_per_unit = 0.5 * grid.inverse_cell;  // the grid coarsens between batches
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
       SoupChunk& chunk = chunks[j];
       chunk.clear();
@@ -1230,19 +1173,21 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
       for (std::size_t i = j * kChunkTriangles; i < end; ++i) {
         const auto& corners = batch.corners[i];
         Facet f;
+        CellKey key[3];
         for (int k = 0; k < 3; ++k) {
-          f.p[k] = corners[k].cast<double>();
-          if (!f.p[k].allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
-          f.key[k] = grid.locate(f.p[k], f.local[k]);
-          const std::uint32_t s = chunk.slot(f.key[k]);
+          const Vec3d p = corners[k].cast<double>();
+          if (!p.allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
+          Vec3d local;
+          key[k] = grid.locate(p, local);
+          const std::uint32_t s = chunk.slot(key[k]);
           f.index[k] = s;
           ++chunk.points[s];
-          chunk.point_sum[s] += f.local[k].cast<float>();
+          chunk.point_sum[s] += local.cast<float>();
+          for (int a = 0; a < 3; ++a) f.p[k][a] = p[a], f.local[k][a] = local[a];
         }
-        f.set_normal();
+        f.set_cross();
         set_inverse_lengths(&f, 1);
-        contribute(f, chunk, grid, options.boundary);
-        const CellKey(&key)[3] = f.key;
+        contribute(f, chunk, half_per_unit, options.boundary);
         if (key[0] != key[1] && key[1] != key[2] && key[2] != key[0]) {
           chunk.survivors.push_back(CellTriple<CellKey>::of(key[0], key[1], key[2]));
         }

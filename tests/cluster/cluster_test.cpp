@@ -647,9 +647,10 @@ TEST(Cluster, SoupAndIndexedInputAgree) {
   EXPECT_LT(worst, 0.05 * stats.output_cell_size);
 }
 
-// An indexed pass adds the triangles that cross cells from the quantized corners in scalar code of its own; a
-// soup pass adds them from the corners as read, through the general code. Every sum is the same up to the
-// quantization (2^-21 of a cell), borders included: carried in the quadrics, they show in the output.
+// An indexed pass adds the triangles that cross cells from the quantized corners, after resolving each
+// vertex's cell once, and those inside one cell in integer arithmetic of their own; a soup pass locates every
+// corner as read. Every sum is the same up to the quantization (2^-21 of a cell), borders included: carried
+// in the quadrics, they show in the output.
 TEST(Cluster, IndexedAndSoupPassesAddCrossingTrianglesAlike) {
   const IndexedMesh mesh = tilted(lumpy_sphere_with_holes());
   for (int boundary = 0; boundary < 2; ++boundary) {
