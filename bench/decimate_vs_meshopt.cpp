@@ -1,5 +1,6 @@
 // ocsimp's QEM decimator against meshoptimizer's meshopt_simplify, in one process: same meshes, same face
-// counts, time of the simplification call alone (median of runs), and the two-sided distance of each result
+// counts, time of the simplification call alone (runs alternate between the two; medians of the times and of
+// the run-by-run ratios), and the two-sided distance of each result
 // to the original (tools/compare.h: area-uniform samples both ways plus vertices, exact closest points).
 //
 //   decimate_vs_meshopt [--runs N] [--ratios 0.1,0.01] [--samples N] [--threads N] NAME=MESH_FILE...
@@ -37,29 +38,26 @@ using Clock = std::chrono::steady_clock;
 
 struct Run {
   ocsimp::IndexedMesh mesh;
-  double seconds = 0;      // wall, median of runs
-  double cpu_seconds = 0;  // process CPU, median of runs
+  double seconds = 0;      // wall
+  double cpu_seconds = 0;  // process CPU
 };
 
-Run run_meshopt(const ocsimp::IndexedMesh& mesh, std::size_t target_faces, int runs) {
+// One timed call of each library. The caller alternates them, so that a slow spell of the (shared, virtual)
+// machine falls on both: timed in separate blocks of runs, the same binary's ratio on bunny ranged from 1.1
+// to 2.1 between invocations.
+Run run_meshopt(const ocsimp::IndexedMesh& mesh, std::size_t target_faces) {
   std::vector<unsigned int> indices;
   indices.reserve(mesh.triangles.size() * 3);
   for (const ocsimp::Triangle& t : mesh.triangles) indices.insert(indices.end(), t.begin(), t.end());
   std::vector<unsigned int> destination(indices.size());
-  std::vector<double> times, cpu;
-  std::size_t count = 0;
-  for (int r = 0; r < runs; ++r) {
-    const auto start = Clock::now();
-    const double cpu_start = cpu_seconds();
-    count =
-        meshopt_simplify(destination.data(), indices.data(), indices.size(), mesh.positions[0].data(),
-                         mesh.positions.size(), sizeof(ocsimp::Vec3f), target_faces * 3, FLT_MAX, 0, nullptr);
-    cpu.push_back(cpu_seconds() - cpu_start);
-    times.push_back(std::chrono::duration<double>(Clock::now() - start).count());
-  }
   Run result;
-  result.seconds = median(times);
-  result.cpu_seconds = median(cpu);
+  const auto start = Clock::now();
+  const double cpu_start = cpu_seconds();
+  const std::size_t count =
+      meshopt_simplify(destination.data(), indices.data(), indices.size(), mesh.positions[0].data(),
+                       mesh.positions.size(), sizeof(ocsimp::Vec3f), target_faces * 3, FLT_MAX, 0, nullptr);
+  result.cpu_seconds = cpu_seconds() - cpu_start;
+  result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   result.mesh.positions =
       mesh.positions;  // meshopt keeps the input vertex buffer; the distance ignores unused ones
   for (std::size_t i = 0; i + 2 < count; i += 3)
@@ -67,27 +65,36 @@ Run run_meshopt(const ocsimp::IndexedMesh& mesh, std::size_t target_faces, int r
   return result;
 }
 
-Run run_ocsimp(const ocsimp::IndexedMesh& mesh, std::size_t target_faces, int runs, int threads,
+Run run_ocsimp(const ocsimp::IndexedMesh& mesh, std::size_t target_faces, int threads,
                ocsimp::DecimateStats* stats) {
-  std::vector<double> times, cpu;
+  ocsimp::QuadricMesh input{mesh, {}};  // the copy is not timed: meshopt reads the caller's arrays
+  ocsimp::DecimateOptions options;
+  options.target_faces = target_faces;
+  options.threads = threads;
   Run result;
-  for (int r = 0; r < runs; ++r) {
-    ocsimp::QuadricMesh input{mesh, {}};  // the copy is not timed: meshopt reads the caller's arrays
-    ocsimp::DecimateOptions options;
-    options.target_faces = target_faces;
-    options.threads = threads;
-    const auto start = Clock::now();
-    const double cpu_start = cpu_seconds();
-    ocsimp::DecimateResult out = ocsimp::decimate(std::move(input), options);
-    cpu.push_back(cpu_seconds() - cpu_start);
-    times.push_back(std::chrono::duration<double>(Clock::now() - start).count());
-    result.mesh = std::move(out.mesh);
-    *stats = out.stats;
-  }
-  result.seconds = median(times);
-  result.cpu_seconds = median(cpu);
+  const auto start = Clock::now();
+  const double cpu_start = cpu_seconds();
+  ocsimp::DecimateResult out = ocsimp::decimate(std::move(input), options);
+  result.cpu_seconds = cpu_seconds() - cpu_start;
+  result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  result.mesh = std::move(out.mesh);
+  *stats = out.stats;
   return result;
 }
+
+// Medians over the alternated runs: each library's wall and CPU seconds, and the ratios ours / meshopt taken
+// run by run.
+struct Timing {
+  std::vector<double> theirs, ours, theirs_cpu, ours_cpu, ratio, ratio_cpu;
+  void add(const Run& t, const Run& o) {
+    theirs.push_back(t.seconds);
+    ours.push_back(o.seconds);
+    theirs_cpu.push_back(t.cpu_seconds);
+    ours_cpu.push_back(o.cpu_seconds);
+    ratio.push_back(o.seconds / t.seconds);
+    ratio_cpu.push_back(o.cpu_seconds / t.cpu_seconds);
+  }
+};
 
 }  // namespace
 
@@ -137,9 +144,14 @@ int main(int argc, char** argv) {
       compare.samples = samples;
       for (double ratio : ratios) {
         const auto target = static_cast<std::size_t>(std::llround(ratio * double(mesh.face_count())));
-        const Run theirs = run_meshopt(mesh, target, runs);
         ocsimp::DecimateStats stats;
-        const Run ours = run_ocsimp(mesh, theirs.mesh.face_count(), runs, threads, &stats);
+        Run theirs, ours;
+        Timing timing;
+        for (int r = 0; r < runs; ++r) {
+          theirs = run_meshopt(mesh, target);
+          ours = run_ocsimp(mesh, theirs.mesh.face_count(), threads, &stats);
+          timing.add(theirs, ours);
+        }
         const ocsimp::SurfaceDistance d_theirs =
             measure_distance(original, ocsimp::DistanceIndex(theirs.mesh), compare);
         const ocsimp::SurfaceDistance d_ours =
@@ -147,11 +159,11 @@ int main(int argc, char** argv) {
         char target_text[32];
         std::snprintf(target_text, sizeof target_text, "%g %%", 100 * ratio);
         std::printf("| %s | %s | meshopt_simplify | %zu | %.3f | | %.3f | | %.4f | %.4f | |\n", name.c_str(),
-                    target_text, theirs.mesh.face_count(), theirs.seconds, theirs.cpu_seconds,
+                    target_text, theirs.mesh.face_count(), median(timing.theirs), median(timing.theirs_cpu),
                     d_theirs.percent(d_theirs.rms), d_theirs.percent(d_theirs.hausdorff));
         std::printf("| %s | %s | ocsimp decimate | %zu | %.3f | %.2f | %.3f | %.2f | %.4f | %.4f | %.3g |\n",
-                    name.c_str(), target_text, ours.mesh.face_count(), ours.seconds,
-                    ours.seconds / theirs.seconds, ours.cpu_seconds, ours.cpu_seconds / theirs.cpu_seconds,
+                    name.c_str(), target_text, ours.mesh.face_count(), median(timing.ours),
+                    median(timing.ratio), median(timing.ours_cpu), median(timing.ratio_cpu),
                     d_ours.percent(d_ours.rms), d_ours.percent(d_ours.hausdorff), stats.max_error);
         std::fflush(stdout);
       }
