@@ -119,6 +119,37 @@ TEST(Cli, BadInputGivesOneLineNamingTheFileAndExit2) {
   EXPECT_NE(missing.err.find("nope.ply"), std::string::npos);
 }
 
+// A strip one cell wide clusters to vertices only: the run succeeds, writes them, and says on stderr (even
+// with -q) that no face is left and the file cannot be read back.
+TEST(Cli, AResultWithoutFacesIsWrittenWithAWarning) {
+  test::TempDir dir;
+  const std::string strip = dir / "strip.ply";
+  {
+    std::ofstream out(strip);
+    out << "ply\nformat ascii 1.0\nelement vertex 20\nproperty float x\nproperty float y\nproperty float z\n"
+           "element face 18\nproperty list uchar int vertex_indices\nend_header\n";
+    for (int i = 0; i < 10; ++i) out << i << " 0 0\n" << i << " 0.001 0\n";
+    for (int i = 0; i < 9; ++i) {
+      out << "3 " << 2 * i << " " << 2 * i + 2 << " " << 2 * i + 3 << "\n";
+      out << "3 " << 2 * i << " " << 2 * i + 3 << " " << 2 * i + 1 << "\n";
+    }
+  }
+  const std::string result = dir / "out.ply";
+  const CommandResult r = run("cluster -q --grid 4 " + strip + " -o " + result, dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(lines(r.err), 1u) << r.err;
+  EXPECT_NE(r.err.find("warning"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("no faces"), std::string::npos) << r.err;
+  EXPECT_TRUE(std::filesystem::exists(result));
+  EXPECT_EQ(run("info " + result, dir).exit_code, 2);
+
+  // With faces left, nothing is said.
+  const CommandResult kept = run("cluster -q --cell-size 0.0004 " + strip + " -o " + result, dir);
+  EXPECT_EQ(kept.exit_code, 0) << kept.err;
+  EXPECT_TRUE(kept.err.empty()) << kept.err;
+  EXPECT_GT(read_mesh(result).face_count(), 0u);
+}
+
 TEST(Cli, FailedConvertLeavesNothingBehind) {
   test::TempDir dir;
   const std::string bad = dir / "truncated.ply";

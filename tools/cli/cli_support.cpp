@@ -126,6 +126,17 @@ nlohmann::json phases_json(const std::vector<PhaseReport>& phases) {
   return array;
 }
 
+void write_result(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
+  write_mesh(path, mesh, options);
+  if (mesh.triangles.empty()) {
+    std::fprintf(
+        stderr,
+        "ocsimp: warning: %s has no faces (%zu vertices): every triangle collapsed; ocsimp cannot read "
+        "it back\n",
+        path.c_str(), mesh.positions.size());
+  }
+}
+
 void write_json_report(const std::string& path, const nlohmann::json& report) {
   AtomicFile file(path);
   file.write(report.dump(2));

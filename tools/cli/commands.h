@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "ocsimp/core/system.h"
+#include "ocsimp/streaming/io.h"
 #include "ocsimp/tools/pipeline.h"
 
 namespace ocsimp::cli {
@@ -27,6 +28,12 @@ void add_bench_command(CLI::App& app);
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.
 ProgressFn make_progress(bool quiet);
+
+// Writes a simplified mesh to `path` (atomically, as write_mesh does), and warns on stderr, even with
+// --quiet, when it has no faces: every triangle collapsed, as on an input too thin for the resolution or with
+// a target below what its topology allows. The vertices are still written, but ocsimp's readers refuse a
+// mesh without faces, so the file cannot be fed back in.
+void write_result(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options);
 
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);

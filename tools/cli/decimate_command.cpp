@@ -92,7 +92,7 @@ void add_decimate_command(CLI::App& app) {
     WriteOptions write;
     write.ascii = flags->ascii;
     write.progress = progress;
-    write_mesh(flags->output, result.mesh, write);
+    write_result(flags->output, result.mesh, write);
     const double write_seconds = seconds_since(write_start);
     const double total_seconds = seconds_since(start);
     const DecimateStats& s = result.stats;

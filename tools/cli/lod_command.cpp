@@ -108,7 +108,7 @@ void add_lod_command(CLI::App& app) {
     options.on_level = [&](std::size_t level, const IndexedMesh& mesh) {
       files.push_back(lod_level_path(flags->output, sorted[level], several));
       vertices.push_back(mesh.vertex_count());
-      write_mesh(files.back(), mesh, write);
+      write_result(files.back(), mesh, write);
     };
     const auto start = std::chrono::steady_clock::now();
     const LodResult result = lod(flags->input, options);

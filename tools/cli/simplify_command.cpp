@@ -85,7 +85,7 @@ void add_simplify_command(CLI::App& app) {
     WriteOptions write;
     write.ascii = flags->ascii;
     write.progress = progress;
-    write_mesh(flags->output, result.mesh, write);
+    write_result(flags->output, result.mesh, write);
     result.phases.push_back({"write", seconds_since(write_start), result.mesh.face_count(),
                              result.mesh.face_count(), peak_rss_bytes()});
     const double total = seconds_since(start);
