@@ -31,8 +31,8 @@ ProgressFn make_progress(bool quiet);
 
 // Writes a simplified mesh to `path` (atomically, as write_mesh does), and warns on stderr, even with
 // --quiet, when it has no faces: every triangle collapsed, as on an input too thin for the resolution or with
-// a target below what its topology allows. The vertices are still written, but ocsimp's readers refuse a
-// mesh without faces, so the file cannot be fed back in.
+// a target below what its topology allows. The vertices are still written (except to Draco, whose writer
+// refuses a mesh without faces with an error), but ocsimp's readers refuse such a file as input.
 void write_result(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options);
 
 // Writes `report` as pretty JSON to `path`, atomically.
