@@ -26,14 +26,15 @@
 // region collapses, in rounds, the pairs at or below a key threshold taken from the keys then queued in all
 // regions (so cheap pairs go first everywhere, as with one queue), and stops at its share of the targets. A
 // second pass does the same over a shifted, turned partition, whose regions hold the first one's seams. The
-// passes do up to 97 % of the collapses a count target asks for (all those under the error bound when it is
-// the only criterion); phase 2 is the global loop below, from one queue of everything left, to the exact
-// target, with compaction, parity, deferral and the retry of blocked pairs as before. What a region does
-// depends only on its own records and the thresholds, which are computed between rounds from every region's
-// queue, so the output is the same for any thread count. On the generated 1 M-triangle mesh the passes also
-// take about 10 % less CPU than the global loop did, as each region's queue stays small. Vertices are not
-// renumbered by region: on a 10 M-triangle mesh a region's records lie all over the arrays, and it takes
-// about 1.6 times the CPU per input triangle of the 1 M mesh.
+// passes do most of the collapses a count target asks for (about 96 % on the shared scans; all those under
+// the error bound when it is the only criterion), scaled to the part of the mesh off the seams so that the
+// seams' share is left to phase 2; phase 2 is the global loop below, from one queue of everything left, to
+// the exact target, with compaction, parity, deferral and the retry of blocked pairs as before. What a region
+// does depends only on its own records and the thresholds, which are computed between rounds from every
+// region's queue, so the output is the same for any thread count. On the generated 1 M-triangle mesh the
+// passes also take about 10 % less CPU than the global loop did, as each region's queue stays small. Vertices
+// are not renumbered by region: on a 10 M-triangle mesh a region's records lie all over the arrays, and it
+// takes about 1.6 times the CPU per input triangle of the 1 M mesh.
 //
 // A candidate's key comes from its quadric cost (plus the attribute penalty). Guards and the shape penalty
 // depend on the neighbourhood, which moves without the pair's quadric changing, so they are evaluated when
@@ -1570,7 +1571,7 @@ struct Decimator {
   static constexpr std::uint64_t kFacesPerRegion = 32768;
   static constexpr std::size_t kMinRegions = 4, kMaxRegions = 64;
   // Passes of the first phase, each over its own partition (the second one's seams cross the first one's),
-  // and the share of the targets' collapses done by the end of each.
+  // and the share of the collapses still to do that each does (see run_pass).
   static constexpr int kPasses = 2;
   static constexpr double kPassShare[kPasses] = {0.7, 0.97};
   // Rounds per pass, and the part of the pass's remaining collapses each round's key threshold aims at.
@@ -1776,9 +1777,17 @@ struct Decimator {
     const std::vector<std::uint64_t> per_region = assign_regions(pass, regions, scratch);
     const std::vector<std::uint32_t>& ids = scratch.ids;
 
-    // The collapses the targets ask for in all, and this pass's part of them.
+    // The collapses the targets ask for in all, and this pass's part of those still to do. A pair with an end
+    // on a seam waits for a later pass, so the part is taken of the share of the mesh the regions may change
+    // (their interior vertices): taken of the whole mesh, it came out of the interiors alone, which on a
+    // small mesh decimated far (seams about as large as the target) left them much coarser than the seams. On
+    // a 20 k-triangle CAD part at 3 % that doubled the RMS distance and quadrupled the Hausdorff distance
+    // against the single global queue; now both are within a few percent of it.
     const double needed = collapses_needed();
-    const double budget = kPassShare[pass] * needed - double(stats.collapses);
+    std::uint64_t interior = 0;
+    for (std::size_t v = 0; v < verts.size(); ++v) interior += (ids[v] & kOutside) == 0;
+    const double budget = kPassShare[pass] * std::max(0.0, needed - double(stats.collapses)) *
+                          double(interior) / double(std::max<std::uint64_t>(1, verts_alive));
     const std::uint64_t faces0 = faces_alive, verts0 = verts_alive, boundary0 = boundary_edges;
     std::vector<std::unique_ptr<Decimator>> workers;
     for (std::size_t r = 0; r < regions; ++r) {
