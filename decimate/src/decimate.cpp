@@ -443,24 +443,6 @@ struct Decimator {
     if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
   }
 
-  // The number of distinct neighbours w > v of v.
-  Index count_upper_neighbours(Index v, std::vector<Index>& buffer) const {
-    const Vertex& x = verts[v];
-    // Room for every corner up front: no capacity check per element in this per-vertex loop.
-    if (buffer.size() < 2 * std::size_t{x.seg_count}) buffer.resize(2 * std::size_t{x.seg_count});
-    Index* out = buffer.data();
-    std::size_t n = 0;
-    for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
-      for (Index w : faces[vf[i]].v) {
-        if (w > v) out[n++] = w;
-      }
-    }
-    small_sort(out, out + n);
-    Index unique = 0;
-    for (std::size_t i = 0; i < n; ++i) unique += i == 0 || out[i] != out[i - 1];
-    return unique;
-  }
-
   // One side of a face seen from its lower endpoint v: the other endpoint w > v, the face, and which of the
   // face's edge slots it is.
   struct UpperSide {
@@ -468,23 +450,19 @@ struct Decimator {
     std::uint32_t slot;
   };
 
+  // Marks, in a face's edge slot between the two passes of build_edges, the one side that writes the edge's
+  // record.
+  static constexpr Index kFirstSide = 0x80000000u;
+
   // Each undirected edge gets an id from its lower endpoint: vertex v numbers the distinct neighbours w > v
-  // it sees in its faces, in increasing w. Per-vertex work in parallel; a prefix sum makes the ids global.
+  // it sees in its faces, in increasing w. One sort per vertex: the first pass numbers each chunk's edges
+  // from 0 in the faces' edge slots, and once a prefix sum has given each chunk its first id, a pass over
+  // the faces adds it and writes the edge records. (Counting the edges in a pass of its own, to number them
+  // globally at once, sorted every vertex's neighbours twice: about a quarter of the setup's instructions.)
   void build_edges() {
     const std::size_t nv = verts.size();
     constexpr std::size_t grain = 4096;
     std::vector<Index> first_edge(nv + 1, 0);
-    parallel_chunks(nv, grain, [&](std::size_t begin, std::size_t end) {
-      std::vector<Index> buffer;
-      for (std::size_t v = begin; v < end; ++v) first_edge[v + 1] = count_upper_neighbours(Index(v), buffer);
-    });
-    for (std::size_t v = 0; v < nv; ++v) {
-      if (std::uint64_t{first_edge[v]} + first_edge[v + 1] >= first_state)
-        throw Error("decimate: too many edges");
-      first_edge[v + 1] += first_edge[v];
-    }
-    edges.resize(first_edge[nv]);
-    heap = EdgeHeap(edges.empty() ? nullptr : &edges[0].slot, 3);
 
     // Boundary edges (one face) and folds (two faces turned back on each other) found per chunk, then ordered
     // by id so constraint planes add up identically.
@@ -494,6 +472,7 @@ struct Decimator {
       std::vector<UpperSide> sides;
       auto& found = chunk_boundaries[begin / grain];
       auto& folds = chunk_folds[begin / grain];
+      Index id = 0;  // within the chunk
       for (std::size_t vi = begin; vi < end; ++vi) {
         const Index v = static_cast<Index>(vi);
         const Vertex& x = verts[v];
@@ -515,12 +494,12 @@ struct Decimator {
           for (; j > 0 && moving.w < sides[j - 1].w; --j) sides[j] = sides[j - 1];
           sides[j] = moving;
         }
-        Index id = first_edge[v];
+        const Index first = id;
         for (std::size_t i = 0; i < n; ++id) {
           std::size_t j = i + 1;
           while (j < n && sides[j].w == sides[i].w) ++j;
-          edges[id] = {{v, sides[i].w}, kIdleError};
-          for (std::size_t k = i; k < j; ++k) faces[sides[k].f].e[sides[k].slot] = id;
+          faces[sides[i].f].e[sides[i].slot] = id | kFirstSide;
+          for (std::size_t k = i + 1; k < j; ++k) faces[sides[k].f].e[sides[k].slot] = id;
           if (j - i == 1) {
             found.emplace_back(id, sides[i].f);
           } else if (j - i == 2 && is_fold(sides[i].f, sides[i + 1].f)) {
@@ -529,12 +508,38 @@ struct Decimator {
           }
           i = j;
         }
+        first_edge[v + 1] = id - first;
+      }
+      if (id >= kFirstSide) throw Error("decimate: too many edges");
+    });
+    for (std::size_t v = 0; v < nv; ++v) {
+      if (std::uint64_t{first_edge[v]} + first_edge[v + 1] >= first_state)
+        throw Error("decimate: too many edges");
+      first_edge[v + 1] += first_edge[v];
+    }
+    edges.resize(first_edge[nv]);
+    heap = EdgeHeap(edges.empty() ? nullptr : &edges[0].slot, 3);
+
+    // A slot's edge belongs to the chunk of its lower endpoint, whose first id is first_edge[chunk start].
+    parallel_chunks(faces.size(), 8192, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) {
+        Face& face = faces[f];
+        for (int i = 0; i < 3; ++i) {
+          const Index v = face.v[i], w = face.v[i == 2 ? 0 : i + 1];
+          const Index low = std::min(v, w);
+          const Index local = face.e[i];
+          const Index id = (local & ~kFirstSide) + first_edge[low / grain * grain];
+          face.e[i] = id;
+          if (local & kFirstSide) edges[id] = {{low, std::max(v, w)}, kIdleError};
+        }
       }
     });
-    for (const auto& chunk : chunk_boundaries)
-      boundary_list.insert(boundary_list.end(), chunk.begin(), chunk.end());
+    for (std::size_t c = 0; c < chunk_boundaries.size(); ++c) {
+      const Index base = first_edge[c * grain];
+      for (const auto& [id, f] : chunk_boundaries[c]) boundary_list.emplace_back(id + base, f);
+      for (const auto& [id, f] : chunk_folds[c]) fold_list.emplace_back(id + base, f);
+    }
     boundary_edges = boundary_list.size();
-    for (const auto& chunk : chunk_folds) fold_list.insert(fold_list.end(), chunk.begin(), chunk.end());
   }
 
   // Two faces turned back on each other by more than 120 degrees, judged by their encoded input normals
