@@ -938,16 +938,33 @@ struct Decimator {
   // would otherwise keep a few live faces in each of their segments, and every gather would visit all of
   // those scattered vertex records and lists (about a fifth of the collapse loop's cache misses).
   void gather_faces(Index v, std::vector<Index>& out) {
+    Vertex& head = verts[v];
+    if (head.seg_next == v) {
+      // One segment (most vertices): packed in place while copied out, with no per-face capacity check.
+      Index* list = vf.data() + head.seg_start;
+      const Index n = head.seg_count;
+      if (out.size() < n) out.resize(n);
+      Index* to = out.data();
+      Index kept = 0;
+      for (Index i = 0; i < n; ++i) {
+        const Index f = list[i];
+        if (!face_alive(f)) continue;
+        list[kept] = f;
+        to[kept++] = f;
+      }
+      head.seg_count = kept;
+      out.resize(kept);
+      return;
+    }
     out.clear();
     for_live_faces(v, [&](Index f) { out.push_back(f); });
-    const bool single = verts[v].seg_next == v;
     std::size_t written = 0;
     Index prev = v;
     Index seg = v;
     do {
       Vertex& s = verts[seg];
       const Index next = s.seg_next;
-      const std::size_t n = single ? out.size() : std::min<std::size_t>(s.seg_cap, out.size() - written);
+      const std::size_t n = std::min<std::size_t>(s.seg_cap, out.size() - written);
       std::copy(out.begin() + written, out.begin() + written + n, vf.begin() + s.seg_start);
       s.seg_count = static_cast<Index>(n);
       written += n;
