@@ -820,7 +820,10 @@ struct Decimator {
     return q;
   }
 
-  static double trace(const Quadric& q) { return q.a00 + q.a11 + q.a22; }
+  template <class Coefficients>
+  static double trace(const Coefficients& q) {
+    return q.a00 + q.a11 + q.a22;
+  }
   static double distance(double error, double weight) { return weight > 0 ? std::sqrt(error / weight) : 0.0; }
 
   // The queue's order. `cost` is a quadric error (plus penalties), area * distance^2 over `weight` =
@@ -845,12 +848,13 @@ struct Decimator {
   // Always inlined: in `recost` the call's prologue and epilogue were about 0.7 % of a bunny decimation's
   // instructions (callgrind, 450.6 M -> 447.4 M).
   [[gnu::always_inline]] std::uint32_t key_of_edge(Index e, float* key) const {
-    Quadric q;
+    decimate_detail::PairSum q;
     Placement p;
     return evaluate_inline(e, &q, &p, key, nullptr);
   }
 
-  [[gnu::always_inline]] std::uint32_t evaluate_inline(Index e, Quadric* q, Placement* p, float* key,
+  template <class Sum>
+  [[gnu::always_inline]] std::uint32_t evaluate_inline(Index e, Sum* q, Placement* p, float* key,
                                                        double* cost_out) const {
     const Index a = edges[e].v[0], b = edges[e].v[1];
     const Vertex& va = verts[a];

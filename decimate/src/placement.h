@@ -29,7 +29,14 @@ inline void add_to(Quadric& sum, const Coefficients& q) {
   sum.c += q.c;
 }
 
-inline void add_pair(Quadric& sum, const Quadric& a, const Quadric& b) {
+// A summed quadric that is written in full before it is read: without Quadric's zero initializers, which the
+// compiler kept as dead stores in every re-cost.
+struct PairSum {
+  double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
+};
+
+template <class Sum>
+inline void add_pair(Sum& sum, const Quadric& a, const Quadric& b) {
   sum.a00 = a.a00 + b.a00;
   sum.a01 = a.a01 + b.a01;
   sum.a02 = a.a02 + b.a02;
@@ -42,7 +49,8 @@ inline void add_pair(Quadric& sum, const Quadric& a, const Quadric& b) {
   sum.c = a.c + b.c;
 }
 
-inline double evaluate(const Quadric& q, const Vec3d& p) {
+template <class Coefficients>
+inline double evaluate(const Coefficients& q, const Vec3d& p) {
   const double x = p.x(), y = p.y(), z = p.z();
   return x * (q.a00 * x + 2 * (q.a01 * y + q.a02 * z + q.b0)) + y * (q.a11 * y + 2 * (q.a12 * z + q.b1)) +
          z * (q.a22 * z + 2 * q.b2) + q.c;
@@ -53,7 +61,8 @@ inline double evaluate(const Quadric& q, const Vec3d& p) {
 // original samples (which lie on the original surface) survive where the quadric cannot tell positions apart.
 // Always inlined: called out of line, the summed quadric went through memory and the call cost about 5 % of
 // a 70 k-triangle decimation's instructions.
-[[gnu::always_inline]] inline Placement place_pair(const Quadric& q, const Vec3d& pa, const Vec3d& pb,
+template <class Coefficients>
+[[gnu::always_inline]] inline Placement place_pair(const Coefficients& q, const Vec3d& pa, const Vec3d& pb,
                                                    double reach) {
   // Scalar code throughout: this runs for every candidate at setup and about seven times per collapse, and
   // Eigen's small temporaries cost about a third more instructions here.
