@@ -97,20 +97,31 @@ class EdgeHeap {
   void sift_down(std::size_t i) {
     const HeapEntry moving = entries_[i];
     const std::size_t n = entries_.size();
+    HeapEntry* const entries = entries_.data();
     for (;;) {
       const std::size_t first = arity * i + 1;
       if (first >= n) break;
+      // The first child with the least key, as a left-to-right scan finds it; written so that the compiler
+      // selects instead of branching, and unrolled for a full set of children.
       std::size_t best = first;
-      const std::size_t last = first + arity < n ? first + arity : n;
-      for (std::size_t c = first + 1; c < last; ++c) {
-        if (entries_[c].key < entries_[best].key) best = c;
+      float best_key = entries[first].key;
+      auto visit = [&](std::size_t c) {
+        const float k = entries[c].key;
+        const bool less = k < best_key;
+        best = less ? c : best;
+        best_key = less ? k : best_key;
+      };
+      if (first + arity <= n) {
+        for (std::size_t c = first + 1; c < first + arity; ++c) visit(c);
+      } else {
+        for (std::size_t c = first + 1; c < n; ++c) visit(c);
       }
-      if (!(entries_[best].key < moving.key)) break;
-      entries_[i] = entries_[best];
-      slot(entries_[i].edge) = static_cast<std::uint32_t>(i);
+      if (!(best_key < moving.key)) break;
+      entries[i] = entries[best];
+      slot(entries[i].edge) = static_cast<std::uint32_t>(i);
       i = best;
     }
-    entries_[i] = moving;
+    entries[i] = moving;
     slot(moving.edge) = static_cast<std::uint32_t>(i);
   }
 
