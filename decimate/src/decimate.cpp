@@ -1256,9 +1256,13 @@ struct Decimator {
     const std::size_t n = heap.size();
     if (n < 2) return kNone;
     std::size_t best = 1;
+    float best_key = heap.entry(1).key;
     const std::size_t last = std::min<std::size_t>(n, 1 + EdgeHeap::arity);
     for (std::size_t i = 2; i < last; ++i) {
-      if (heap.entry(i).key < heap.entry(best).key) best = i;
+      const float k = heap.entry(i).key;
+      const bool less = k < best_key;  // selects, not branches (as in EdgeHeap::sift_down)
+      best = less ? i : best;
+      best_key = less ? k : best_key;
     }
     return heap.entry(best).edge;
   }
