@@ -888,7 +888,11 @@ struct Decimator {
     return region_of != nullptr && (region_of[edges[e].v[0]] != region || region_of[edges[e].v[1]] != region);
   }
 
-  void recost(Index e) {
+  void recost(Index e) { recost_inline(e); }
+
+  // Inlined in the collapse's loop over the new vertex's pairs (about 7 per collapse): out of line, the
+  // call's register saves and restores cost about 0.3 % of a bunny decimation's instructions.
+  [[gnu::always_inline]] void recost_inline(Index e) {
     if (outside_region(e)) return;
     float key = 0;
     const std::uint32_t state = key_of_edge(e, &key);
@@ -1526,7 +1530,7 @@ struct Decimator {
     // The next pair's face lists arrived during the work above; its faces load during the re-costs.
     prefetch_stage(next, 3);
     for (const Neighbour& n : nbrs) {
-      if (!edge_dead(n.edge)) recost(n.edge);
+      if (!edge_dead(n.edge)) recost_inline(n.edge);
     }
     if (!virtual_pairs.empty()) {
       for (Index id : virtual_pairs[k]) recost(id);
