@@ -1667,6 +1667,7 @@ struct Decimator {
       spread[x] = 0;
       for (int i = 0; i < kBits; ++i) spread[x] |= ((x >> i) & 1u) << (3 * i);
     }
+    const int turn[3] = {pass % 3, (1 + pass) % 3, (2 + pass) % 3};  // axis a's bit offset
     parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = begin; v < end; ++v) {
         const Vertex& x = verts[v];
@@ -1677,7 +1678,7 @@ struct Decimator {
         std::uint32_t code = 0;
         for (int a = 0; a < 3; ++a) {
           const double c = std::clamp((double(x.p[a]) - box_low[a]) * scale + shift, 0.0, double(kSide - 1));
-          code |= spread[static_cast<std::uint32_t>(c)] << ((a + pass) % 3);
+          code |= spread[static_cast<std::uint32_t>(c)] << turn[a];
         }
         ids[v] = code;
       }
