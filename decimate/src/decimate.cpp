@@ -257,7 +257,7 @@ struct Decimator {
   // Scratch, reused across collapses.
   std::uint32_t stamp_now = 0;
   std::vector<Index> fa, fb, dying, scratch_faces, scratch_ids;
-  std::vector<Neighbour> nbrs;
+  BigVector<Neighbour> nbrs;  // grows without initialization (see collapse)
   std::vector<Index> deferred, blocked;
 
   std::uint64_t faces_alive = 0, verts_alive = 0, boundary_edges = 0;
@@ -1441,7 +1441,12 @@ struct Decimator {
 
     // The kept vertex's edges, keyed by the other end.
     const std::uint32_t s = next_stamp();
-    nbrs.clear();
+    // Room for every side of k's and r's faces up front, so the loops below add neighbours without a capacity
+    // check each.
+    const std::size_t most = 2 * (fk.size() + fr.size());
+    if (nbrs.size() < most) nbrs.resize(most);
+    Neighbour* const nb = nbrs.data();
+    Index count = 0;
     for (Index f : fk) {
       const Face& t = faces[f];
       const int c = corner_of(t, k);
@@ -1451,20 +1456,21 @@ struct Decimator {
         Vertex& vx = verts[x];
         if (vx.stamp != s) {
           vx.stamp = s;
-          vx.mark = static_cast<Index>(nbrs.size());
-          nbrs.push_back({x, t.e[side == 1 ? c : (c + 2) % 3], 1, 0, 0});
+          vx.mark = count;
+          nb[count++] = {x, t.e[side == 1 ? c : (c + 2) % 3], 1, 0, 0};
         } else {
-          ++nbrs[vx.mark].cnt_k;
+          ++nb[vx.mark].cnt_k;
         }
       }
     }
     for (Index f : dying) {
       for (Index x : faces[f].v) {
-        if (x != k && x != r) ++nbrs[verts[x].mark].cnt_d;
+        if (x != k && x != r) ++nb[verts[x].mark].cnt_d;
       }
     }
     // Every edge around k is re-costed below: start loading the quadrics and heap slots it will read.
-    for (const Neighbour& n : nbrs) {
+    for (Index i = 0; i < count; ++i) {
+      const Neighbour& n = nb[i];
       __builtin_prefetch(reinterpret_cast<const char*>(&verts[n.x]) + 64);
       const std::uint32_t slot = edges[n.edge].slot;
       if (slot < first_state) heap.prefetch(slot);
@@ -1482,7 +1488,7 @@ struct Decimator {
         const Index id = t.e[edge_slot];
         Vertex& vx = verts[x];
         if (vx.stamp == s) {
-          Neighbour& n = nbrs[vx.mark];
+          Neighbour& n = nb[vx.mark];
           ++n.cnt_r;
           if (n.edge != id) {
             if (!is_dying) t.e[edge_slot] = n.edge;
@@ -1490,14 +1496,15 @@ struct Decimator {
           }
         } else {
           vx.stamp = s;
-          vx.mark = static_cast<Index>(nbrs.size());
-          nbrs.push_back({x, id, 0, 1, 0});
+          vx.mark = count;
+          nb[count++] = {x, id, 0, 1, 0};
           Edge& edge = edges[id];
           edge.v[edge.v[0] == r ? 0 : 1] = k;
         }
       }
       if (!is_dying) t.v[c] = k;
     }
+    nbrs.resize(count);  // shrinking: no reallocation, so `nb` stays valid
     kill(e);
 
     // Boundary edges before (around k and r, the collapsed edge once) and after (around k).
