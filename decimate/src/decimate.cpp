@@ -1733,8 +1733,9 @@ struct Decimator {
   }
 
   // The key a live pair has now: its entry's in the global queue, else costed now. Returns the state when it
-  // is no candidate (dead, blocked, idle).
-  std::uint32_t current_key(Index e, float* key) {
+  // is no candidate (dead, blocked, idle). Always inlined in build_region_heaps' loop over every edge: called
+  // out of line, its register saves and restores were about 1 % of a bunny decimation's instructions.
+  [[gnu::always_inline]] std::uint32_t current_key(Index e, float* key) {
     const std::uint32_t slot = edges[e].slot;
     if (slot < first_state) {
       *key = heap.entry(slot).key;
