@@ -548,6 +548,13 @@ struct Decimator {
     const Face& a = faces[f0];
     const Face& b = faces[f1];
     if (a.ref[0] == kNoNormal || b.ref[0] == kNoNormal) return false;
+    // Decoded, each component has the sign of its code (x and y; z: whether |x| + |y| is within 32767, see
+    // decode_normal). Two normals in the same octant have no negative product, so no negative dot product:
+    // most neighbouring faces, told apart without decoding.
+    auto octant = [](const std::int16_t* n) {
+      return (n[0] < 0 ? 1 : 0) | (n[1] < 0 ? 2 : 0) | (std::abs(n[0]) + std::abs(n[1]) > 32767 ? 4 : 0);
+    };
+    if (octant(a.ref) == octant(b.ref)) return false;
     const Vec3d n0 = decode_normal(a.ref), n1 = decode_normal(b.ref);
     const double dot = n0.dot(n1);
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
