@@ -560,11 +560,7 @@ struct Decimator {
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
   }
 
-  // A face's plane quadric, in a struct without default member values: the array of them is written in full
-  // by a parallel loop, and zeroing it first (as a Quadric array is) cost a serial pass and its page faults.
-  struct PlaneTerm {
-    double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
-  };
+  using PlaneTerm = decimate_detail::RawQuadric;  // a face's plane quadric
 
   // Sums the area-weighted plane quadric of every face into its corners. Each face's plane is computed once
   // (a vertex-by-vertex pass computes it at each of the three corners), in parallel over a block of faces;
@@ -849,14 +845,15 @@ struct Decimator {
   // Always inlined: in `recost` the call's prologue and epilogue were about 0.7 % of a bunny decimation's
   // instructions (callgrind, 450.6 M -> 447.4 M).
   [[gnu::always_inline]] std::uint32_t key_of_edge(Index e, float* key) const {
-    decimate_detail::PairSum q;
+    decimate_detail::RawQuadric q;
     Placement p;
     return evaluate_inline(e, &q, &p, key, nullptr);
   }
 
   // The pair's summed quadric, placement, cost (quadric error plus attribute penalty) and key. Returns 0 for
   // a candidate, else the idle state it is in. Inlined in try_top too (its one other caller), with the sum
-  // in a PairSum: about 0.1 % of a bunny decimation's instructions went to the call and to zeroing a Quadric.
+  // in a RawQuadric: about 0.1 % of a bunny decimation's instructions went to the call and to zeroing a
+  // Quadric.
   template <class Sum>
   [[gnu::always_inline]] std::uint32_t evaluate_inline(Index e, Sum* q, Placement* p, float* key,
                                                        double* cost_out) const {
@@ -1330,7 +1327,7 @@ struct Decimator {
     const Index next = predicted_next();
     prefetch_stage(next, 1);
     const Index a = edges[e].v[0], b = edges[e].v[1];
-    decimate_detail::PairSum q;
+    decimate_detail::RawQuadric q;
     Placement pl;
     float key = 0;
     double cost = 0;
@@ -1424,7 +1421,7 @@ struct Decimator {
     }
   }
 
-  void collapse(Index e, Index a, Index b, const decimate_detail::PairSum& q, const Placement& pl,
+  void collapse(Index e, Index a, Index b, const decimate_detail::RawQuadric& q, const Placement& pl,
                 std::uint64_t orphans, Index next) {
     // Keep the locked end if there is one (it does not move), else the one with more faces (fewer rewrites).
     const bool la = locked(a), lb = locked(b);

@@ -29,9 +29,10 @@ inline void add_to(Quadric& sum, const Coefficients& q) {
   sum.c += q.c;
 }
 
-// A summed quadric that is written in full before it is read: without Quadric's zero initializers, which the
-// compiler kept as dead stores in every re-cost.
-struct PairSum {
+// A quadric's ten coefficients without Quadric's zero initializers, for records written in full before they
+// are read: a face's plane in the array that a parallel loop fills (zeroing it first cost a serial pass and
+// its page faults), and a pair's sum in every re-cost (the compiler kept the zeros as dead stores).
+struct RawQuadric {
   double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
 };
 
