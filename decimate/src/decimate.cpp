@@ -1051,11 +1051,10 @@ struct Decimator {
     return true;
   }
 
-  // Flip and degeneracy guard over every surviving face around a and b with the moved corner at p; also the
-  // worst resulting triangle quality and longest squared edge, for the shape penalty.
-  bool shapes_ok(Index a, Index b, const Vec3d& p, double* worst_quality, double* longest2) const {
-    // Qualities are compared squared, q^2 = 12 |n|^2 / sum(l^2)^2, so the loop needs no square root.
-    double worst2 = 1.0 / 12.0, longest = 0;  // worst |n|^2 / sum^2; 1/12 is an equilateral triangle's
+  // Calls body(face, p0, p1, p2) for every face around a and b that survives their collapse, p0 its corner
+  // at a or b (before the collapse) and p1, p2 the next corners; stops at, and returns, the first false.
+  template <class Body>
+  [[gnu::always_inline]] bool all_surviving_faces(Index a, Index b, const Body& body) const {
     for (int side = 0; side < 2; ++side) {
       const std::vector<Index>& list = side == 0 ? fa : fb;
       const Index moved = side == 0 ? a : b, other = side == 0 ? b : a;
@@ -1064,33 +1063,58 @@ struct Decimator {
         const Face& face = faces[f];
         if (has_corner(face, other)) continue;  // dying
         const int c = corner_of(face, moved);
-        const Vec3d p1 = rel(face.v[(c + 1) % 3]), p2 = rel(face.v[(c + 2) % 3]);
-        const Vec3d e12 = p2 - p1;
-        const Vec3d n_old = (p1 - p0).cross(p2 - p0);
-        const Vec3d n_new = (p1 - p).cross(p2 - p);
-        const double old2 = n_old.squaredNorm(), new2 = n_new.squaredNorm();
-        // Turned by 90 degrees or more in this collapse (a face that was already degenerate has no direction
-        // to keep), or by more than 60 from the input face it started as: small turns add up over many
-        // collapses.
-        if (old2 > 0 && n_old.dot(n_new) <= 0) return false;
-        if (face.ref[0] != kNoNormal) {
-          const Vec3d ref = decode_normal(face.ref);
-          const double dot = n_new.dot(ref);
-          if (dot <= 0 || dot * dot <= kRefCos2 * new2 * ref.squaredNorm()) return false;
-        }
-        const double l01 = (p1 - p).squaredNorm(), l02 = (p2 - p).squaredNorm(), l12 = e12.squaredNorm();
-        const double sum = l01 + l02 + l12;
-        if (12 * new2 < kDegenerateQuality * kDegenerateQuality * sum * sum) {
-          const double old_sum = (p1 - p0).squaredNorm() + (p2 - p0).squaredNorm() + l12;
-          if (new2 * old_sum * old_sum < old2 * sum * sum) return false;  // degenerate, and worse than before
-        }
-        if (sum > 0) worst2 = std::min(worst2, new2 / (sum * sum));
-        longest = std::max(longest, std::max(l01, std::max(l02, l12)));
+        if (!body(face, p0, rel(face.v[(c + 1) % 3]), rel(face.v[(c + 2) % 3]))) return false;
       }
     }
+    return true;
+  }
+
+  // Flip and degeneracy guard over every surviving face around a and b with the moved corner at p; also the
+  // worst resulting triangle quality and longest squared edge, for the shape penalty.
+  bool shapes_ok(Index a, Index b, const Vec3d& p, double* worst_quality, double* longest2) const {
+    // Qualities are compared squared, q^2 = 12 |n|^2 / sum(l^2)^2, so the loop needs no square root.
+    double worst2 = 1.0 / 12.0, longest = 0;  // worst |n|^2 / sum^2; 1/12 is an equilateral triangle's
+    const bool ok =
+        all_surviving_faces(a, b, [&](const Face& face, const Vec3d& p0, const Vec3d& p1, const Vec3d& p2) {
+          const Vec3d e12 = p2 - p1;
+          const Vec3d n_old = (p1 - p0).cross(p2 - p0);
+          const Vec3d n_new = (p1 - p).cross(p2 - p);
+          const double old2 = n_old.squaredNorm(), new2 = n_new.squaredNorm();
+          // Turned by 90 degrees or more in this collapse (a face that was already degenerate has no
+          // direction to keep), or by more than 60 from the input face it started as: small turns add up over
+          // many collapses.
+          if (old2 > 0 && n_old.dot(n_new) <= 0) return false;
+          if (face.ref[0] != kNoNormal) {
+            const Vec3d ref = decode_normal(face.ref);
+            const double dot = n_new.dot(ref);
+            if (dot <= 0 || dot * dot <= kRefCos2 * new2 * ref.squaredNorm()) return false;
+          }
+          const double l01 = (p1 - p).squaredNorm(), l02 = (p2 - p).squaredNorm(), l12 = e12.squaredNorm();
+          const double sum = l01 + l02 + l12;
+          if (12 * new2 < kDegenerateQuality * kDegenerateQuality * sum * sum) {
+            const double old_sum = (p1 - p0).squaredNorm() + (p2 - p0).squaredNorm() + l12;
+            if (new2 * old_sum * old_sum < old2 * sum * sum)
+              return false;  // degenerate, and worse than before
+          }
+          if (sum > 0) worst2 = std::min(worst2, new2 / (sum * sum));
+          longest = std::max(longest, std::max(l01, std::max(l02, l12)));
+          return true;
+        });
     *worst_quality = std::sqrt(12 * worst2);
     *longest2 = longest;
-    return true;
+    return ok;
+  }
+
+  // The worst quality, before the collapse, of the faces around a and b that survive it (the old shapes that
+  // shapes_ok compares with). Only for collapses that would leave a sliver, so not in shapes_ok's loop.
+  double worst_quality_before(Index a, Index b) const {
+    double worst2 = 1.0 / 12.0;  // squared, as in shapes_ok
+    all_surviving_faces(a, b, [&](const Face&, const Vec3d& p0, const Vec3d& p1, const Vec3d& p2) {
+      const double sum = (p1 - p0).squaredNorm() + (p2 - p0).squaredNorm() + (p2 - p1).squaredNorm();
+      if (sum > 0) worst2 = std::min(worst2, (p1 - p0).cross(p2 - p0).squaredNorm() / (sum * sum));
+      return true;
+    });
+    return std::sqrt(12 * worst2);
   }
 
   // ---------------------------------------------------------------- the loop
@@ -1386,9 +1410,16 @@ struct Decimator {
       block(e, kBlockedFlip);
       return;
     }
-    if (opt.shape_weight > 0 && worst_quality < kSliverQuality) {
+    // A sliver counts against a collapse only where it is worse than the faces were before: CAD tessellations
+    // are made of slivers, and penalizing every collapse among them put shape before geometry (teapot.obj at
+    // 10 %: RMS distance 0.229 % of the diagonal with the fixed threshold, 0.161 with this one; bunny, horse
+    // and igea at 10, 3 and 1 % within 1.2 %).
+    const double sliver = opt.shape_weight > 0 && worst_quality < kSliverQuality
+                              ? std::min(kSliverQuality, worst_quality_before(a, b))
+                              : 0.0;
+    if (worst_quality < sliver) {
       const double weight = trace(q);
-      const double penalty = opt.shape_weight * weight * longest2 * (1 - worst_quality / kSliverQuality);
+      const double penalty = opt.shape_weight * weight * longest2 * (1 - worst_quality / sliver);
       const float true_key = key_of(cost + penalty, weight);
       if (true_key > top.key) {
         heap.update(e, true_key);
