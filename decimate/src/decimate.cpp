@@ -823,10 +823,7 @@ struct Decimator {
     return q;
   }
 
-  template <class Coefficients>
-  static double trace(const Coefficients& q) {
-    return q.a00 + q.a11 + q.a22;
-  }
+  static double trace(const decimate_detail::RawQuadric& q) { return q.a00 + q.a11 + q.a22; }
   static double distance(double error, double weight) { return weight > 0 ? std::sqrt(error / weight) : 0.0; }
 
   // The queue's order. `cost` is a quadric error (plus penalties), area * distance^2 over `weight` =
@@ -854,9 +851,8 @@ struct Decimator {
   // a candidate, else the idle state it is in. Inlined in try_top too (its one other caller), with the sum
   // in a RawQuadric: about 0.1 % of a bunny decimation's instructions went to the call and to zeroing a
   // Quadric.
-  template <class Sum>
-  [[gnu::always_inline]] std::uint32_t evaluate_inline(Index e, Sum* q, Placement* p, float* key,
-                                                       double* cost_out) const {
+  [[gnu::always_inline]] std::uint32_t evaluate_inline(Index e, decimate_detail::RawQuadric* q, Placement* p,
+                                                       float* key, double* cost_out) const {
     const Index a = edges[e].v[0], b = edges[e].v[1];
     const Vertex& va = verts[a];
     const Vertex& vb = verts[b];

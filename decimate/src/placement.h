@@ -36,8 +36,7 @@ struct RawQuadric {
   double a00, a01, a02, a11, a12, a22, b0, b1, b2, c;
 };
 
-template <class Sum>
-inline void add_pair(Sum& sum, const Quadric& a, const Quadric& b) {
+inline void add_pair(RawQuadric& sum, const Quadric& a, const Quadric& b) {
   sum.a00 = a.a00 + b.a00;
   sum.a01 = a.a01 + b.a01;
   sum.a02 = a.a02 + b.a02;
@@ -62,8 +61,7 @@ inline double evaluate(const Coefficients& q, const Vec3d& p) {
 // original samples (which lie on the original surface) survive where the quadric cannot tell positions apart.
 // Always inlined: called out of line, the summed quadric went through memory and the call cost about 5 % of
 // a 70 k-triangle decimation's instructions.
-template <class Coefficients>
-[[gnu::always_inline]] inline Placement place_pair(const Coefficients& q, const Vec3d& pa, const Vec3d& pb,
+[[gnu::always_inline]] inline Placement place_pair(const RawQuadric& q, const Vec3d& pa, const Vec3d& pb,
                                                    double reach) {
   // Scalar code throughout: this runs for every candidate at setup and about seven times per collapse, and
   // Eigen's small temporaries cost about a third more instructions here.
