@@ -271,6 +271,25 @@ TEST(Decimate, CubeKeepsItsCorners) {
   }
 }
 
+// The shortest, longest and mean length of the faces' edges (each interior edge counted twice).
+struct EdgeLengths {
+  double shortest = std::numeric_limits<double>::infinity(), longest = 0, mean = 0;
+};
+EdgeLengths edge_lengths(const IndexedMesh& mesh) {
+  EdgeLengths e;
+  double total = 0;
+  for (const Triangle& t : mesh.triangles) {
+    for (int i = 0; i < 3; ++i) {
+      const double l = (mesh.positions[t[i]] - mesh.positions[t[(i + 1) % 3]]).norm();
+      e.shortest = std::min(e.shortest, l);
+      e.longest = std::max(e.longest, l);
+      total += l;
+    }
+  }
+  if (mesh.face_count() > 0) e.mean = total / (3.0 * mesh.face_count());
+  return e;
+}
+
 // The longest edge at each vertex.
 std::vector<double> longest_edges(const IndexedMesh& mesh) {
   std::vector<double> longest(mesh.vertex_count(), 0);
@@ -862,15 +881,8 @@ TEST(Decimate, FirstPhaseKeepsASphereOnTheSphere) {
   EXPECT_EQ(turned_faces(sphere, r.mesh), 0u);
   // The regions leave no seam: edge lengths stay even over the sphere (a seam would keep a band of input
   // edges, about 0.012 long, where the rest are about 0.1).
-  double shortest = std::numeric_limits<double>::infinity(), total = 0;
-  for (const Triangle& t : r.mesh.triangles) {
-    for (int i = 0; i < 3; ++i) {
-      const double l = (r.mesh.positions[t[i]] - r.mesh.positions[t[(i + 1) % 3]]).norm();
-      shortest = std::min(shortest, l);
-      total += l;
-    }
-  }
-  EXPECT_GT(shortest, 0.2 * total / (3.0 * r.mesh.face_count()));
+  const EdgeLengths lengths = edge_lengths(r.mesh);
+  EXPECT_GT(lengths.shortest, 0.2 * lengths.mean);
 }
 
 TEST(Decimate, FirstPhaseLeavesTheSeamsShareToTheEnd) {
@@ -881,17 +893,8 @@ TEST(Decimate, FirstPhaseLeavesTheSeamsShareToTheEnd) {
   const IndexedMesh sphere = test::sphere(6);  // 32768 faces: four regions
   const DecimateResult r = run(sphere, faces(1000));
   ASSERT_EQ(r.mesh.face_count(), 1000u);
-  double longest = 0, total = 0;
-  std::size_t count = 0;
-  for (const Triangle& t : r.mesh.triangles) {
-    for (int i = 0; i < 3; ++i) {
-      const double l = (r.mesh.positions[t[i]] - r.mesh.positions[t[(i + 1) % 3]]).norm();
-      longest = std::max(longest, l);
-      total += l;
-      ++count;
-    }
-  }
-  EXPECT_LT(longest, 2.0 * total / double(count));
+  const EdgeLengths lengths = edge_lengths(r.mesh);
+  EXPECT_LT(lengths.longest, 2.0 * lengths.mean);
   for (const Vec3f& p : r.mesh.positions) EXPECT_LT(std::abs(p.cast<double>().norm() - 1), 0.008);
 }
 
