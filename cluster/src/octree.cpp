@@ -14,7 +14,8 @@
 // cheapest pair) and is updated in place. The face count of a face target is not tracked merge by merge:
 // it can only fall as clusters merge, so the loop runs in batches sized to reach the target, recounts the
 // (shrinking) list of distinct faces after each batch, and finds the exact stopping merge inside the batch
-// that crossed the target by bisection.
+// that crossed the target by bisection. Clusters left without a face are found the same way, by counting
+// at chosen points of the merge sequence (see FacedClusters), never merge by merge.
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -30,6 +31,7 @@ namespace ocsimp::cluster_detail {
 namespace {
 
 constexpr std::uint32_t kEnd = ~std::uint32_t{0};
+constexpr std::size_t kNone = ~std::size_t{0};
 
 // Merging clusters that no input triangle joins costs this many times its error increase: such a union is
 // not a connected region and its output triangles fold over its neighbours', so it should wait, but not for
@@ -237,6 +239,88 @@ std::uint32_t find_root(std::vector<std::uint32_t>& up, std::uint32_t x) {
   }
   return r;
 }
+
+using Merges = std::vector<std::array<std::uint32_t, 2>>;
+
+// The vertices the clusters make after the first m merges of a merge sequence. A cluster all of whose fine
+// triangles have collapsed is a vertex of no face: an output point that spends the vertex budget and shows
+// nothing. A "stray" one, which a collapsed triangle links to another cluster, joins that cluster instead;
+// the others (a part of the input smaller than a cluster, or cells whose every triangle collapsed inside
+// them) stay points. So the vertices are the clusters less the strays.
+class ClusterVertices {
+ public:
+  ClusterVertices(const CellTriangles& triangles, std::size_t cells) : triangles_(triangles), root_(cells) {}
+
+  // The state after the first m merges, cell by cell: the cluster holding a fine cell (named by its lowest
+  // cell) and whether it is a stray. Returns the vertices.
+  std::size_t settle(const Merges& merges, std::size_t m) {
+    for (std::size_t i = 0; i < root_.size(); ++i) root_[i] = static_cast<std::uint32_t>(i);
+    for (std::size_t k = 0; k < m; ++k) root_[merges[k][1]] = merges[k][0];
+    flags_.assign(root_.size(), 0);
+    for (const CellTriangle& t : triangles_) mark({root(t.first()), root(t.second()), root(t.third())});
+    return root_.size() - m - strays(root_.size());
+  }
+  std::uint32_t root(std::uint32_t cell) { return find_root(root_, cell); }
+  bool stray(std::uint32_t root) const { return flags_[root] == kLinked; }
+  // Joins two clusters of the settled state, given by their roots.
+  void join(std::uint32_t a, std::uint32_t b) { root_[std::max(a, b)] = std::min(a, b); }
+
+  // Counts from here on are of `m` merges or more. They need only the fine triangles whose corners lie in
+  // two or three clusters after the first m merges, over those clusters numbered densely: a count is then a
+  // pass over about the output's triangles, not the fine ones.
+  void start_at(const Merges& merges, std::size_t m) {
+    for (std::size_t i = 0; i < root_.size(); ++i) root_[i] = static_cast<std::uint32_t>(i);
+    for (std::size_t k = 0; k < m; ++k) root_[merges[k][1]] = merges[k][0];
+    base_ = m;
+    dense_.assign(root_.size(), kEnd);
+    ids_ = 0;
+    linking_.clear();
+    for (const CellTriangle& t : triangles_) {
+      const std::uint32_t a = root(t.first()), b = root(t.second()), c = root(t.third());
+      if (a != b || b != c) linking_.push_back({dense(a), dense(b), dense(c)});
+    }
+  }
+  // The vertices after the first m merges, m not below start_at's.
+  std::size_t count(const Merges& merges, std::size_t m) {
+    for (std::size_t k = base_; k < m; ++k) {
+      dense(merges[k][0]);
+      dense(merges[k][1]);
+    }
+    up_.resize(ids_);
+    for (std::uint32_t i = 0; i < ids_; ++i) up_[i] = i;
+    for (std::size_t k = base_; k < m; ++k) up_[dense_[merges[k][1]]] = dense_[merges[k][0]];
+    flags_.assign(ids_, 0);
+    for (const Face& f : linking_) mark({find_root(up_, f.a), find_root(up_, f.b), find_root(up_, f.c)});
+    return root_.size() - m - strays(ids_);
+  }
+
+ private:
+  static constexpr std::uint8_t kLinked = 1, kFaced = 2;
+
+  // Flags the clusters of a fine triangle: a face for each when they are three, a link for each when two.
+  void mark(const std::array<std::uint32_t, 3>& r) {
+    if (r[0] == r[1] && r[1] == r[2]) return;
+    const bool face = r[0] != r[1] && r[1] != r[2] && r[2] != r[0];
+    for (std::uint32_t c : r) flags_[c] |= face ? kFaced : kLinked;
+  }
+  std::size_t strays(std::size_t clusters) const {
+    return static_cast<std::size_t>(std::count(flags_.begin(), flags_.begin() + clusters, kLinked));
+  }
+  // Clusters after start_at's merges get dense ids as they are first met (merges after it only join them).
+  std::uint32_t dense(std::uint32_t cluster) {
+    std::uint32_t& d = dense_[cluster];
+    if (d == kEnd) d = ids_++;
+    return d;
+  }
+
+  const CellTriangles& triangles_;
+  std::vector<std::uint32_t> root_;
+  std::vector<std::uint8_t> flags_;  // of roots only
+  std::size_t base_ = 0;
+  std::vector<std::uint32_t> dense_, up_;
+  std::uint32_t ids_ = 0;
+  std::vector<Face> linking_;
+};
 
 // Position of the pair of child slots i < j in a node's triangular cost table.
 inline std::size_t pair_index(std::uint32_t i, std::uint32_t j) {
@@ -600,23 +684,116 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
           lo = mid;
         }
       }
-      merges.resize(start + hi);
+      kept = start + hi;
       count = target.faces;
       result.target_met = true;
     }
-    kept = merges.size();
+    if (!result.target_met) kept = merges.size();
   }
 
-  // Number clusters by their first fine cell.
-  std::vector<std::uint32_t> union_of(n);
-  for (std::size_t i = 0; i < n; ++i) union_of[i] = static_cast<std::uint32_t>(i);
-  for (std::size_t m = 0; m < kept; ++m) union_of[merges[m][1]] = merges[m][0];
-  std::vector<std::uint32_t> id(n, kEnd);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint32_t r = find_root(union_of, static_cast<std::uint32_t>(i));
-    if (id[r] == kEnd) id[r] = result.count++;
-    result.cluster_of[i] = id[r];
+  // Strays (see ClusterVertices). The vertices left once they join their neighbours only fall as merges go
+  // on, as the faces do, and a merge that only folds a stray into another cluster leaves them as they are. A
+  // vertex target is met by the vertices, and the stop moves on to the last merge that keeps their count, so
+  // the merge sequence rather than a stray's first link decides where most strays go; the strays left then
+  // join the cluster of another corner of their first linking fine triangle. A count the merges step over
+  // (a merge can make two strays) keeps as many strays as points as it takes. Should strays that join each
+  // other still break an exact vertex target, the merge stops where the clusters alone number it.
+  ClusterVertices vertices(cells.triangles, n);
+  // The last merge count from `first` on (where the vertices are `level`) that keeps `level`; `beyond`, when
+  // known, is a count with fewer. Merges beyond those made so far are made as needed.
+  auto last_keeping = [&](std::size_t first, std::size_t level, std::size_t beyond) {
+    std::size_t lo = first, hi = beyond;
+    for (std::size_t step = 1; hi == kNone; step *= 2) {
+      while (merges.size() < lo + step && merge_next()) {
+      }
+      const std::size_t probe = std::min(lo + step, merges.size());
+      if (vertices.count(merges, probe) < level) {
+        hi = probe;
+      } else if (probe == merges.size() && probe < lo + step) {
+        return probe;  // the heap ran dry
+      } else {
+        lo = probe;
+      }
+    }
+    while (hi - lo > 1) {
+      const std::size_t mid = lo + (hi - lo) / 2;
+      (vertices.count(merges, mid) >= level ? lo : hi) = mid;
+    }
+    return lo;
+  };
+  const std::size_t all_clusters = kept;
+  std::size_t spare = 0;  // strays kept as points
+  std::size_t settled = kNone;
+  if (result.target_met && target.faces == 0) {
+    const std::size_t want = target.vertices;
+    const std::size_t short_by = want - vertices.settle(merges, kept);
+    settled = kept;
+    if (short_by > 0) {
+      settled = kNone;
+      // The first merge count with no more than `want` vertices: step back until above it (a merge removes
+      // about one), then bisect.
+      std::size_t hi = kept, lo = kept;
+      for (std::size_t step = 2 * short_by + 16;; step *= 2) {
+        lo = hi > step ? hi - step : 0;
+        vertices.start_at(merges, lo);
+        if (vertices.count(merges, lo) > want || lo == 0) break;
+        hi = lo;
+      }
+      while (hi - lo > 1) {
+        const std::size_t mid = lo + (hi - lo) / 2;
+        (vertices.count(merges, mid) <= want ? hi : lo) = mid;
+      }
+      if (vertices.count(merges, lo) <= want) hi = lo;  // lo == 0
+      const std::size_t level = vertices.count(merges, hi);
+      if (level == want) {
+        kept = last_keeping(hi, want, kept);
+      } else {
+        kept = hi;
+        spare = want - level;
+      }
+    }
+  } else if (result.target_met) {
+    vertices.start_at(merges, kept);
+    kept = last_keeping(kept, vertices.count(merges, kept), kNone);
   }
+  if (settled != kept) vertices.settle(merges, kept);
+  if (result.target_met) {
+    // Strays join the cluster of another corner of their first linking fine triangle; the `spare` lowest
+    // stay.
+    std::vector<std::uint32_t> into(n, kEnd);
+    for (const CellTriangle& t : cells.triangles) {
+      const std::uint32_t r[3] = {vertices.root(t.first()), vertices.root(t.second()),
+                                  vertices.root(t.third())};
+      for (int k = 0; k < 3; ++k) {
+        if (!vertices.stray(r[k]) || into[r[k]] != kEnd) continue;
+        const std::uint32_t other = r[k] != r[(k + 1) % 3] ? r[(k + 1) % 3] : r[(k + 2) % 3];
+        if (other != r[k]) into[r[k]] = other;
+      }
+    }
+    std::size_t skipped = 0;
+    for (std::uint32_t c = 0; c < n; ++c) {
+      if (into[c] == kEnd || skipped++ < spare) continue;
+      const std::uint32_t a = vertices.root(c), b = vertices.root(into[c]);
+      if (a != b) vertices.join(a, b);
+    }
+  }
+  // Clusters numbered by their first fine cell.
+  std::vector<std::uint32_t> id(n);
+  auto number = [&] {
+    std::fill(id.begin(), id.end(), kEnd);
+    result.count = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t r = vertices.root(static_cast<std::uint32_t>(i));
+      if (id[r] == kEnd) id[r] = result.count++;
+    }
+  };
+  number();
+  if (target.faces == 0 && result.target_met && result.count != target.vertices) {
+    // Strays joined each other: stop where the clusters alone number the target.
+    vertices.settle(merges, all_clusters);
+    number();
+  }
+  for (std::size_t i = 0; i < n; ++i) result.cluster_of[i] = id[vertices.root(static_cast<std::uint32_t>(i))];
   return result;
 }
 

@@ -29,7 +29,7 @@ Clustering regrid(const FineCells& cells, double along);
 Clustering regrid_to_faces(const FineCells& cells, std::uint64_t target_faces);
 
 struct OctreeTarget {
-  std::uint64_t vertices = 0;  // exactly this many clusters, or
+  std::uint64_t vertices = 0;  // exactly this many clusters, each with a face (see octree_merge), or
   std::uint64_t faces = 0;     // the largest face count not above this
 };
 

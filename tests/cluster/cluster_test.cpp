@@ -387,6 +387,38 @@ TEST(Cluster, OctreeVertexTargetIsExactForConsecutiveCounts) {
   }
 }
 
+// A cluster can end with all of its fine triangles collapsed: a vertex of no face. The octree does not
+// spend its budget on such points: every one of the N vertices of a vertex target, and every vertex of a
+// face target, is a corner of a face. A scanner-noisy sphere leaves many of them behind otherwise.
+TEST(Cluster, OctreeVerticesAreAllCornersOfFaces) {
+  IndexedMesh mesh = test::sphere(6);
+  std::uint32_t state = 12345;
+  for (Vec3f& p : mesh.positions) {
+    state = state * 1664525u + 1013904223u;
+    p *= 1.0f + 0.012f * (static_cast<float>(state >> 8) / 16777216.0f - 0.5f);
+  }
+  auto corners = [](const IndexedMesh& m) {
+    std::vector<char> used(m.vertex_count(), 0);
+    for (const Triangle& t : m.triangles)
+      for (Index v : t) used[v] = 1;
+    return static_cast<std::size_t>(std::count(used.begin(), used.end(), 1));
+  };
+  for (std::uint64_t n : {1000ull, 2000ull, 4000ull}) {
+    ClusterStats stats;
+    const QuadricMesh out = run(mesh, octree_options(n), &stats);
+    EXPECT_EQ(out.mesh.vertex_count(), n);
+    EXPECT_EQ(corners(out.mesh), n) << n << " vertices";
+    EXPECT_EQ(stats.isolated_vertices, 0u);
+    EXPECT_TRUE(stats.target_met);
+    ClusterOptions by_faces;
+    by_faces.octree = true;
+    by_faces.target_faces = 2 * n;
+    const QuadricMesh faces = run(mesh, by_faces);
+    EXPECT_LE(faces.mesh.face_count(), 2 * n);
+    EXPECT_EQ(corners(faces.mesh), faces.mesh.vertex_count()) << 2 * n << " faces";
+  }
+}
+
 TEST(Cluster, OctreeBeatsTheUniformGridAtEqualVertexCount) {
   // A box elongated along x with one bumpy end: flat cells should grow, bumpy ones stay small.
   IndexedMesh mesh = test::sphere(6);

@@ -11,8 +11,10 @@
 //  - a uniform grid (`grid` cells along the longest axis, or cubes of `cell_size`), or, with `target_faces`,
 //    a resolution chosen by re-clustering a fine grid's cells (never by another pass over the input);
 //  - an adaptive octree: a fine power-of-two grid whose sibling cells are merged bottom-up, one pair at a
-//    time, least increase of quadric error first (clusters touching only along an edge or at a corner pay
-//    4x), until `target_vertices` (exactly) or `target_faces` (the largest count not above it) is met.
+//    time, least increase of quadric error first (clusters no input triangle joins pay 64x), until
+//    `target_vertices` (exactly) or `target_faces` (the largest count not above it) is met. A cluster whose
+//    triangles have all collapsed would be a vertex of no face: it joins a neighbouring cluster instead, and
+//    the vertex target counts only vertices with faces.
 //
 // Determinism: the output is the same bytes for any thread count. The cells are split among owners (runs of
 // the Morton-ordered cells); each batch of triangles is listed for the owners of their corners' cells, and
@@ -65,8 +67,9 @@ struct ClusterOptions {
 
   // Adaptive octree instead of the uniform grid. Needs exactly one of `target_vertices`, `target_faces`.
   bool octree = false;
-  // Octree only: exactly this many output vertices (fewer only when the finest grid the input allows has
-  // fewer occupied cells; ClusterStats::target_met then says so).
+  // Octree only: exactly this many output vertices, each a corner of an output face (fewer only when the
+  // finest grid the input allows has fewer occupied cells; ClusterStats::target_met then says so). Parts of
+  // the input smaller than a cluster end as vertices of no face; they count too.
   std::uint64_t target_vertices = 0;
   // Octree: the largest face count not above this that merging reaches. Uniform grid: the resolution whose
   // face count is the largest not above this, among the re-clusterings of the fine grid's cells.
