@@ -12,8 +12,9 @@
 // quadric" clusters the input directly at that cell size (a true uniform grid), "grid quadric --faces" is the
 // budgeted run itself. meshopt_simplifySloppy (error limit off) then aims at the face count "grid quadric"
 // reached, so the two compare at (nearly) equal face counts, sloppy's at or below ours. Mean and constrained
-// use the same cell size (same cells, same faces); the octree gets the grid's vertex count. Seconds: the
-// median of --runs calls of the simplification alone (ocsimp: cluster() on an in-memory stream).
+// use the same cell size (same cells, same faces); the octree gets the count of the grid's vertices that
+// are corners of faces. Seconds: the median of --runs calls of the simplification alone (ocsimp: cluster()
+// on an in-memory stream).
 #include <meshoptimizer.h>
 
 #include <algorithm>
@@ -183,7 +184,7 @@ int main(int argc, char** argv) {
       ocsimp::ClusterOptions octree;
       octree.threads = threads;
       octree.octree = true;
-      octree.target_vertices = quadric.stats.output_vertices;
+      octree.target_vertices = used_vertices(quadric.mesh);
       octree.fine_cells_per_target = fine;
       const Row octree_row = add("ocsimp octree quadric", run_cluster(original, octree, runs));
 
