@@ -254,8 +254,7 @@ class ClusterVertices {
   // The state after the first m merges, cell by cell: the cluster holding a fine cell (named by its lowest
   // cell) and whether it is a stray. Returns the vertices.
   std::size_t settle(const Merges& merges, std::size_t m) {
-    for (std::size_t i = 0; i < root_.size(); ++i) root_[i] = static_cast<std::uint32_t>(i);
-    for (std::size_t k = 0; k < m; ++k) root_[merges[k][1]] = merges[k][0];
+    replay(merges, m);
     flags_.assign(root_.size(), 0);
     for (const CellTriangle& t : triangles_) mark({root(t.first()), root(t.second()), root(t.third())});
     return root_.size() - m - strays(root_.size());
@@ -269,8 +268,7 @@ class ClusterVertices {
   // two or three clusters after the first m merges, over those clusters numbered densely: a count is then a
   // pass over about the output's triangles, not the fine ones.
   void start_at(const Merges& merges, std::size_t m) {
-    for (std::size_t i = 0; i < root_.size(); ++i) root_[i] = static_cast<std::uint32_t>(i);
-    for (std::size_t k = 0; k < m; ++k) root_[merges[k][1]] = merges[k][0];
+    replay(merges, m);
     base_ = m;
     dense_.assign(root_.size(), kEnd);
     ids_ = 0;
@@ -296,6 +294,11 @@ class ClusterVertices {
 
  private:
   static constexpr std::uint8_t kLinked = 1, kFaced = 2;
+
+  void replay(const Merges& merges, std::size_t m) {
+    for (std::size_t i = 0; i < root_.size(); ++i) root_[i] = static_cast<std::uint32_t>(i);
+    for (std::size_t k = 0; k < m; ++k) root_[merges[k][1]] = merges[k][0];
+  }
 
   // Flags the clusters of a fine triangle: a face for each when they are three, a link for each when two.
   void mark(const std::array<std::uint32_t, 3>& r) {
