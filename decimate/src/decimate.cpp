@@ -50,6 +50,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -1718,23 +1719,32 @@ struct Decimator {
         ids[v] = code;
       }
     });
-    // Vertices per cell, then, in place, each cell's region.
+    // Vertices per cell, then, in place, each cell's region. Most cells of a surface are empty and no vertex
+    // reads them: a bit per cell marks the others, so the serial walk in cell order skips 64 empty cells at a
+    // time (walking all 2^18 cells was about 1 % of a 70 k-triangle decimation's instructions).
     std::vector<std::uint32_t>& cells = scratch.cells;
     cells.assign(kCells + 1, 0u);
-    for (std::size_t v = 0; v < nv; ++v) ++cells[ids[v]];
+    std::vector<std::uint64_t> occupied(kCells / 64 + 1, 0);
+    for (std::size_t v = 0; v < nv; ++v) {
+      const std::uint32_t c = ids[v];
+      ++cells[c];
+      occupied[c / 64] |= std::uint64_t{1} << (c % 64);
+    }
     std::vector<std::uint64_t> per_region(regions, 0);
     const std::uint64_t total = std::max<std::uint64_t>(1, verts_alive);
     std::uint64_t before = 0;
-    for (std::uint32_t c = 0; c < kCells; ++c) {
-      const std::uint32_t count = cells[c];
-      if (count == 0) continue;  // no vertex reads it; most cells of a surface are empty
-      // A cell goes to the region its middle vertex falls in.
-      const std::uint64_t middle = before + count / 2;
-      const auto r =
-          static_cast<std::uint32_t>(std::min<std::uint64_t>(regions - 1, middle * regions / total));
-      cells[c] = r;
-      per_region[r] += count;
-      before += count;
+    for (std::uint32_t word = 0; word < kCells / 64; ++word) {
+      for (std::uint64_t bits = occupied[word]; bits != 0; bits &= bits - 1) {
+        const std::uint32_t c = word * 64 + static_cast<std::uint32_t>(std::countr_zero(bits));
+        const std::uint32_t count = cells[c];
+        // A cell goes to the region its middle vertex falls in.
+        const std::uint64_t middle = before + count / 2;
+        const auto r =
+            static_cast<std::uint32_t>(std::min<std::uint64_t>(regions - 1, middle * regions / total));
+        cells[c] = r;
+        per_region[r] += count;
+        before += count;
+      }
     }
     cells[kCells] = kOutside;  // the vertices without faces
     parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
