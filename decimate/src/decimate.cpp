@@ -259,6 +259,7 @@ struct Decimator {
   std::uint32_t stamp_now = 0;
   std::vector<Index> fa, fb, dying, scratch_faces, scratch_ids;
   BigVector<Neighbour> nbrs;  // grows without initialization (see collapse)
+  Index staged_edge = kNone;  // the pair whose neighbourhood the last collapse prefetched (see try_top)
   std::vector<Index> deferred, blocked;
 
   std::uint64_t faces_alive = 0, verts_alive = 0, boundary_edges = 0;
@@ -1240,6 +1241,7 @@ struct Decimator {
       if (!uvs.empty()) uvs[to] = uvs[v];
     }
     stamp_now = 0;
+    staged_edge = kNone;
     verts.resize(nv_new);
     faces.resize(nf_new);
     edges.resize(ne_new);
@@ -1348,6 +1350,11 @@ struct Decimator {
     const Index next = predicted_next();
     prefetch_stage(next, 1);
     const Index a = edges[e].v[0], b = edges[e].v[1];
+    // Stage 4 of the last collapse loaded this pair's neighbourhood when it predicted this pair and both
+    // lists were one segment (those it read), so they are loaded again only otherwise: on the shared scans,
+    // about 1 % of the instructions for prefetches of lines already requested.
+    const bool staged = e == staged_edge && verts[a].seg_next == a && verts[b].seg_next == b;
+    staged_edge = kNone;
     decimate_detail::RawQuadric q;
     Placement pl;
     float key = 0;
@@ -1355,8 +1362,10 @@ struct Decimator {
     evaluate_inline(e, &q, &pl, &key, &cost);
     gather_faces(a, fa);
     gather_faces(b, fb);
-    prefetch_neighbourhood(fa, a);
-    prefetch_neighbourhood(fb, b);
+    if (!staged) {
+      prefetch_neighbourhood(fa, a);
+      prefetch_neighbourhood(fb, b);
+    }
     dying.clear();
     for (Index f : fa) {
       if (has_corner(faces[f], b)) dying.push_back(f);
@@ -1426,6 +1435,7 @@ struct Decimator {
     prefetch_stage(next, 2);
     collapse(e, a, b, q, pl, orphans, next);
     prefetch_stage(next, 4);
+    staged_edge = next;
   }
 
   void interpolate_attributes(Index a, Index b, Index k, const Vec3d& p) {
