@@ -552,11 +552,11 @@ struct Decimator {
     if (a.ref[0] == kNoNormal || b.ref[0] == kNoNormal) return false;
     // Decoded, each component has the sign of its code (x and y; z: whether |x| + |y| is within 32767, see
     // decode_normal). Two normals in the same octant have no negative product, so no negative dot product:
-    // most neighbouring faces, told apart without decoding.
-    auto octant = [](const std::int16_t* n) {
-      return (n[0] < 0 ? 1 : 0) | (n[1] < 0 ? 2 : 0) | (std::abs(n[0]) + std::abs(n[1]) > 32767 ? 4 : 0);
-    };
-    if (octant(a.ref) == octant(b.ref)) return false;
+    // most neighbouring faces, told apart without decoding. The signs of x and y compare as sign bits (an XOR
+    // is negative where they differ), about half the instructions of building both octants' codes.
+    const int xa = a.ref[0], ya = a.ref[1], xb = b.ref[0], yb = b.ref[1];
+    const bool lower_a = std::abs(xa) + std::abs(ya) > 32767, lower_b = std::abs(xb) + std::abs(yb) > 32767;
+    if (((xa ^ xb) | (ya ^ yb)) >= 0 && lower_a == lower_b) return false;
     const Vec3d n0 = decode_normal(a.ref), n1 = decode_normal(b.ref);
     const double dot = n0.dot(n1);
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
