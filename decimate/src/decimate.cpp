@@ -1467,8 +1467,13 @@ struct Decimator {
     const Index k = keep_b ? b : a, r = keep_b ? a : b;
     const std::vector<Index>& fk = keep_b ? fb : fa;
     const std::vector<Index>& fr = keep_b ? fa : fb;
-    Vertex& vk = verts[k];
-    Vertex& vr = verts[r];
+    // The arrays' data in locals: through the members, each access reloaded the vector's address and then
+    // its data pointer after every store and call in these loops.
+    Vertex* const vtx = verts.data();
+    Face* const fcs = faces.data();
+    Edge* const egs = edges.data();
+    Vertex& vk = vtx[k];
+    Vertex& vr = vtx[r];
 
     stats.max_error = std::max(stats.max_error, distance(pl.error, trace(q)));
     interpolate_attributes(a, b, k, pl.point);
@@ -1487,12 +1492,12 @@ struct Decimator {
     Neighbour* const nb = nbrs.data();
     Index count = 0;
     for (Index f : fk) {
-      const Face& t = faces[f];
+      const Face& t = fcs[f];
       const int c = corner_of(t, k);
       for (int side = 1; side <= 2; ++side) {
         const Index x = t.v[(c + side) % 3];
         if (x == r) continue;
-        Vertex& vx = verts[x];
+        Vertex& vx = vtx[x];
         if (vx.stamp != s) {
           vx.stamp = s;
           vx.mark = count;
@@ -1503,21 +1508,21 @@ struct Decimator {
       }
     }
     for (Index f : dying) {
-      for (Index x : faces[f].v) {
-        if (x != k && x != r) ++nb[verts[x].mark].cnt_d;
+      for (Index x : fcs[f].v) {
+        if (x != k && x != r) ++nb[vtx[x].mark].cnt_d;
       }
     }
     // Every edge around k is re-costed below: start loading the quadrics and heap slots it will read.
     for (Index i = 0; i < count; ++i) {
       const Neighbour& n = nb[i];
-      __builtin_prefetch(reinterpret_cast<const char*>(&verts[n.x]) + 64);
-      const std::uint32_t slot = edges[n.edge].slot;
+      __builtin_prefetch(reinterpret_cast<const char*>(&vtx[n.x]) + 64);
+      const std::uint32_t slot = egs[n.edge].slot;
       if (slot < first_state) heap.prefetch(slot);
     }
     // The removed vertex's faces move to k; its edges are renamed, or merged into k's edge to the same
     // vertex.
     for (Index f : fr) {
-      Face& t = faces[f];
+      Face& t = fcs[f];
       const bool is_dying = has_corner(t, k);
       const int c = corner_of(t, r);
       for (int side = 1; side <= 2; ++side) {
@@ -1525,7 +1530,7 @@ struct Decimator {
         if (x == k) continue;
         const int edge_slot = side == 1 ? c : (c + 2) % 3;
         const Index id = t.e[edge_slot];
-        Vertex& vx = verts[x];
+        Vertex& vx = vtx[x];
         if (vx.stamp == s) {
           Neighbour& n = nb[vx.mark];
           ++n.cnt_r;
@@ -1537,7 +1542,7 @@ struct Decimator {
           vx.stamp = s;
           vx.mark = count;
           nb[count++] = {x, id, 0, 1, 0};
-          Edge& edge = edges[id];
+          Edge& edge = egs[id];
           edge.v[edge.v[0] == r ? 0 : 1] = k;
         }
       }
@@ -1557,9 +1562,9 @@ struct Decimator {
     boundary_edges = boundary_edges + after - before;
 
     for (Index f : dying) {
-      Face& t = faces[f];
+      Face& t = fcs[f];
       for (Index x : t.v) {
-        if (x != k && x != r) --verts[x].live_faces;
+        if (x != k && x != r) --vtx[x].live_faces;
       }
       t.v[0] = kNone;
     }
@@ -1584,7 +1589,7 @@ struct Decimator {
     vk.flags &= ~kHasBlocked;
     for (std::size_t i = 0; i < nbrs.size(); ++i) {
       const Index x = nbrs[i].x;
-      if (verts[x].flags & kHasBlocked) retry_around(x);
+      if (vtx[x].flags & kHasBlocked) retry_around(x);
     }
     ++stats.collapses;
   }
