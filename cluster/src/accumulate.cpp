@@ -30,6 +30,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <exception>
@@ -37,6 +38,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <type_traits>
 
 #include "cells.h"
 #include "ocsimp/core/error.h"
@@ -103,21 +105,80 @@ void release_pages(const void* begin, const void* end) {
 
 // ---- Cell sums ------------------------------------------------------------------------------------------
 
-// What the face loop adds to per cell, in one record of two cache lines: a triangle that touches a cell
-// updates its quadric and, if it crosses a cell face, its border planes, and separate arrays would cost
-// separate cache misses.
+// Adds integers modulo 2^bits: wrapping is harmless as long as the final totals fit (see BorderSums).
+template <class T, class U>
+void add_wrapping(T& to, U value) {
+  using W = std::make_unsigned_t<T>;
+  to = static_cast<T>(static_cast<W>(static_cast<W>(to) + static_cast<W>(value)));
+}
+template <class T, class U, std::size_t N>
+void add_wrapping(std::array<std::array<T, N>, 3>& to, const std::array<std::array<U, N>, 3>& part) {
+  for (int a = 0; a < 3; ++a)
+    for (std::size_t c = 0; c < N; ++c) add_wrapping(to[a][c], part[a][c]);
+}
+bool is_zero(const ExactSums& sums) {
+  std::int32_t any = 0;
+  for (const auto& slot : sums)
+    for (std::int32_t v : slot) any |= v;
+  return any == 0;
+}
+
+// round(x) modulo 2^32, for |x| < 2^51: the low bits of x + 1.5 * 2^52, which the addition rounds to an
+// integer, ties to even. So round(-x) = -round(x): terms that are exact opposites give exact opposites.
+std::uint32_t fixed_point(double x) {
+  return static_cast<std::uint32_t>(std::bit_cast<std::uint64_t>(x + 0x1.8p52));
+}
+// Four of them at once, in two vector adds and a shuffle.
+using Lanes = std::uint32_t __attribute__((vector_size(16)));
+using Pair = double __attribute__((vector_size(16)));
+Lanes fixed_points(double a, double b, double c, double d) {
+  const Pair lo = Pair{a, b} + 0x1.8p52, hi = Pair{c, d} + 0x1.8p52;
+  // A cast between vector types of one size keeps the bits.
+  return __builtin_shufflevector((Lanes)lo, (Lanes)hi, 0, 2, 4, 6);
+}
+
+// What the face loop adds to per cell, in one record: a triangle that touches a cell updates its quadric and,
+// if it crosses a cell face, its border sums, and separate arrays would cost separate cache misses. The
+// border sums are 32-bit here, each slot laid out for a half-edge's three vector adds: lanes
+// [u0 u1 u2 m0 | m1 m2 0 0 | w0 w1 w2 o], with u, w = y x u the exact sums and m, o = -m . y the crease
+// sums (see BorderSums); the first two vectors are the same for both ends of an edge.
 struct alignas(64) CellRecord {
   Quadric quadric;
-  BorderSums border;
-};
-static_assert(sizeof(CellRecord) == 128, "a cell record is two cache lines");
+  Lanes border[3][3];
 
-// The cells' totals, in the arrays FineCells hands on, so that the pass ends without copying them into new
-// memory: every fresh page costs a fault, and this VM takes faults one at a time whatever the thread count
-// (about 70 ms for the 128 MB of 1 M cells' sums).
+  bool has_exact() const {
+    const Lanes t = border[0][0] | border[0][2] | border[1][0] | border[1][2] | border[2][0] | border[2][2];
+    return (t[0] | t[1] | t[2]) != 0;
+  }
+  ExactSums exact() const {
+    ExactSums x;
+    for (int k = 0; k < 3; ++k) {
+      const Lanes(&v)[3] = border[k];
+      x[k] = {static_cast<std::int32_t>(v[0][0]), static_cast<std::int32_t>(v[0][1]),
+              static_cast<std::int32_t>(v[0][2]), static_cast<std::int32_t>(v[2][0]),
+              static_cast<std::int32_t>(v[2][1]), static_cast<std::int32_t>(v[2][2])};
+    }
+    return x;
+  }
+  void set_border(const ExactSums& x, const CreaseSums<std::int32_t>& c) {
+    for (int k = 0; k < 3; ++k) {
+      auto u = [](std::int32_t v) { return static_cast<std::uint32_t>(v); };
+      border[k][0] = Lanes{u(x[k][0]), u(x[k][1]), u(x[k][2]), u(c[k][0])};
+      border[k][1] = Lanes{u(c[k][1]), u(c[k][2]), 0, 0};
+      border[k][2] = Lanes{u(x[k][3]), u(x[k][4]), u(x[k][5]), u(c[k][3])};
+    }
+  }
+};
+static_assert(sizeof(CellRecord) == 256, "a cell record is four cache lines");
+
+// The cells' totals, in the arrays FineCells hands on where the types agree, so that the pass ends without
+// copying them into new memory: every fresh page costs a fault, and this VM takes faults one at a time
+// whatever the thread count (about 70 ms for the 80 MB of 1 M cells' quadrics).
+template <class C>
 struct CellStore {
   std::vector<Quadric> quadrics;
-  std::vector<BorderSums> border;  // empty when an indexed pass keeps no border planes
+  ZeroedVector<CreaseSums<C>> crease;  // empty when the pass keeps no border sums
+  std::vector<ExactSums> exact;        // empty but in soup passes: an indexed pass keeps them sparse
   ZeroedVector<std::uint32_t> points;
   ZeroedVector<Vec3f> point_sum;
 
@@ -130,28 +191,30 @@ struct CellStore {
   }
   static bool touched(const Quadric& q) { return q.a00 + q.a11 + q.a22 > 0.0 || std::signbit(q.c); }
 
-  // Adds a chunk's partial sums to cell i.
+  // Adds a chunk's partial sums to cell i (but for the exact border sums of an indexed pass).
   void add(std::uint32_t i, const CellRecord& part) {
     quadrics[i] += part.quadric;
-    if (border.empty()) return;
-    BorderSums& to = border[i];
-    for (int a = 0; a < 3; ++a)
-      for (int c = 0; c < 4; ++c) to.slot[a][c] += part.border.slot[a][c];
-  }
-  CellRecord record(std::uint32_t i) const {
-    CellRecord r;
-    r.quadric = quadrics[i];
-    if (!border.empty()) r.border = border[i];
-    return r;
+    if (!crease.empty()) {
+      CreaseSums<C>& to = crease[i];
+      for (int k = 0; k < 3; ++k) {
+        const Lanes(&v)[3] = part.border[k];
+        add_wrapping(to[k][0], v[0][3]);
+        add_wrapping(to[k][1], v[1][0]);
+        add_wrapping(to[k][2], v[1][1]);
+        add_wrapping(to[k][3], v[2][3]);
+      }
+    }
+    if (!exact.empty()) add_wrapping(exact[i], part.exact());
   }
   void push_back() {
     quadrics.emplace_back();
-    border.emplace_back();
+    crease.emplace_back();
+    exact.emplace_back();
     points.push_back(0);
     point_sum.emplace_back(Vec3f::Zero());
   }
-  // Hands the sums over to `cells`.
-  void move_into(FineCells& cells, bool with_border) {
+  // Hands the sums over to `cells`, but for the border sums.
+  void move_into(FineCells& cells) {
     const std::size_t n = quadrics.size();
     cells.touched.resize(n);
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
@@ -161,8 +224,6 @@ struct CellStore {
     });
     cells.quadrics = std::move(quadrics);
     quadrics = {};
-    if (with_border) cells.border = std::move(border);
-    border = {};
     cells.points = std::move(points);
     cells.point_sum = std::move(point_sum);
   }
@@ -589,7 +650,7 @@ struct FaceChunk {
   CellKey key(std::uint32_t s) const { return keys[s]; }
   const Vec3d& origin(std::uint32_t s) const { return origins[s]; }
   Quadric& quadric(std::uint32_t s) { return records[s].quadric; }
-  BorderSums& border(std::uint32_t s) { return records[s].border; }
+  CellRecord& record(std::uint32_t s) { return records[s]; }
   void clear() {
     table.clear();
     records.clear();
@@ -629,20 +690,11 @@ void set_inverse_lengths(Facet* facets, int count) {
   }
 }
 
-// Adds a border plane to a slot, the four floats in one vector add (each lane the scalar add's bits).
-using Float4 = float __attribute__((vector_size(16)));
-void add_plane(std::array<float, 4>& slot, Float4 plane) {
-  Float4 sum;
-  std::memcpy(&sum, slot.data(), sizeof sum);
-  sum += plane;
-  std::memcpy(slot.data(), &sum, sizeof sum);
-}
-
-// Adds one triangle to its corners' cells: its plane quadric, and the border planes of its edges between two
-// cells. `half_per_unit` is half the inverse cell size.
+// Adds one triangle to its corners' cells: its plane quadric, and the border sums of its edges between two
+// cells.
 template <class Chunk>
-void contribute(const Facet& f, Chunk& chunk, double half_per_unit, bool boundary) {
-  // A zero-area triangle adds no quadric (and no border planes: it has no normal).
+void contribute(const Facet& f, Chunk& chunk, bool boundary) {
+  // A zero-area triangle adds no quadric (and no border sums: it has no normal).
   const bool proper = f.inverse_length > 0.0;
   const double(&c)[3] = f.cross;
   const double dc = -((c[0] * f.p[0][0] + c[1] * f.p[0][1]) + c[2] * f.p[0][2]);
@@ -668,33 +720,31 @@ void contribute(const Facet& f, Chunk& chunk, double half_per_unit, bool boundar
     }
   }
   if (!boundary || !proper) return;
-  const double n[3] = {c[0] * f.inverse_length, c[1] * f.inverse_length, c[2] * f.inverse_length};
+  // The unit normal, times the crease units per exact unit (u below is in exact units).
+  const double to_crease = f.inverse_length * (kCreaseScale / kExactScale);
+  const double n[3] = {c[0] * to_crease, c[1] * to_crease, c[2] * to_crease};
   for (int a = 0; a < 3; ++a) {
     const int b = a == 2 ? 0 : a + 1;
     if (cell[a] == cell[b]) continue;
-    // The two half-edges of an interior edge compute e with exactly opposite bits and the midpoint in each
-    // end's frame with exactly equal bits, so their planes cancel up to the difference of the two
-    // triangles' normals.
+    // The two half-edges of an interior edge compute e with exactly opposite bits and each end's offset in
+    // its cell with exactly equal bits, so u, y x u and their rounded values are exact opposites.
     const double e[3] = {f.p[b][0] - f.p[a][0], f.p[b][1] - f.p[a][1], f.p[b][2] - f.p[a][2]};
     const double e_squared = (e[0] * e[0] + e[1] * e[1]) + e[2] * e[2];
     if (!(e_squared > 0.0)) continue;
-    const double r = 1.0 / std::sqrt(e_squared);
-    const double m[3] = {(e[1] * n[2] - e[2] * n[1]) * r, (e[2] * n[0] - e[0] * n[2]) * r,
-                         (e[0] * n[1] - e[1] * n[0]) * r};
-    const double half[3] = {half_per_unit * e[0], half_per_unit * e[1], half_per_unit * e[2]};
+    const double r = kExactScale / std::sqrt(e_squared);
+    const double u[3] = {e[0] * r, e[1] * r, e[2] * r};  // in exact units
+    const double m[3] = {u[1] * n[2] - u[2] * n[1], u[2] * n[0] - u[0] * n[2], u[0] * n[1] - u[1] * n[0]};
     const double ax = std::abs(e[0]), ay = std::abs(e[1]), az = std::abs(e[2]);
     const int slot = ax >= ay && ax >= az ? 0 : (ay >= az ? 1 : 2);
-    const float mx = static_cast<float>(m[0]), my = static_cast<float>(m[1]), mz = static_cast<float>(m[2]);
-    const double(&la)[3] = f.local[a];
-    const double(&lb)[3] = f.local[b];
-    add_plane(chunk.border(f.index[a]).slot[slot],
-              Float4{mx, my, mz,
-                     static_cast<float>(-((m[0] * (la[0] + half[0]) + m[1] * (la[1] + half[1])) +
-                                          m[2] * (la[2] + half[2])))});
-    add_plane(chunk.border(f.index[b]).slot[slot],
-              Float4{mx, my, mz,
-                     static_cast<float>(-((m[0] * (lb[0] - half[0]) + m[1] * (lb[1] - half[1])) +
-                                          m[2] * (lb[2] - half[2])))});
+    const Lanes shared[2] = {fixed_points(u[0], u[1], u[2], m[0]), fixed_points(m[1], m[2], 0.0, 0.0)};
+    for (const int k : {a, b}) {
+      const double(&y)[3] = f.local[k];
+      Lanes(&to)[3] = chunk.record(f.index[k]).border[slot];
+      to[0] += shared[0];
+      to[1] += shared[1];
+      to[2] += fixed_points(y[1] * u[2] - y[2] * u[1], y[2] * u[0] - y[0] * u[2], y[0] * u[1] - y[1] * u[0],
+                            -((m[0] * y[0] + m[1] * y[1]) + m[2] * y[2]));
+    }
   }
 }
 
@@ -729,22 +779,77 @@ struct PointChunk {
   void sort_by_cell() { table.sort_by_cell(); }
 };
 
-// Adds chunks 0..n-1's partial sums to the cells' totals: `add(chunk, number, cell)`. Each cell receives
-// its chunks' partials in chunk order, so its totals are the same floating-point sums however the cells
-// are split among threads here and however many threads produced the chunks.
+// Cells per block of merge_chunks: one task merges a whole block.
+constexpr int kMergeBlockBits = 14;
+
+// Adds chunks 0..n-1's partial sums to the cells' totals: `add(chunk, number, cell)`, then
+// `block_done(block)` for each block of 2^kMergeBlockBits cells, all on the one task that merged the block.
+// Each cell receives its chunks' partials in chunk order, so its totals are the same floating-point sums
+// however the cells are split among threads here and however many threads produced the chunks.
+template <class Chunk, class Add, class BlockDone>
+void merge_chunks(const Chunk* chunks, std::size_t n, std::size_t cells, Add&& add, BlockDone&& block_done) {
+  const auto blocks = static_cast<std::uint32_t>((cells + (1 << kMergeBlockBits) - 1) >> kMergeBlockBits);
+  tbb::parallel_for(
+      tbb::blocked_range<std::uint32_t>(0, blocks), [&](const tbb::blocked_range<std::uint32_t>& r) {
+        const std::uint32_t begin = r.begin() << kMergeBlockBits;
+        const auto end = static_cast<std::uint32_t>(std::min<std::size_t>(cells, r.end() << kMergeBlockBits));
+        for (std::size_t j = 0; j < n; ++j) {
+          const std::vector<std::uint32_t>& ids = chunks[j].table.ids();
+          const std::vector<std::uint32_t>& order = chunks[j].table.order();
+          auto it = std::partition_point(order.begin(), order.end(),
+                                         [&](std::uint32_t s) { return ids[s] < begin; });
+          for (; it != order.end() && ids[*it] < end; ++it) add(chunks[j], *it, ids[*it]);
+        }
+        for (std::uint32_t b = r.begin(); b != r.end(); ++b) block_done(b);
+      });
+}
 template <class Chunk, class Add>
 void merge_chunks(const Chunk* chunks, std::size_t n, std::size_t cells, Add&& add) {
-  tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, static_cast<std::uint32_t>(cells), 1 << 14),
-                    [&](const tbb::blocked_range<std::uint32_t>& r) {
-                      for (std::size_t j = 0; j < n; ++j) {
-                        const std::vector<std::uint32_t>& ids = chunks[j].table.ids();
-                        const std::vector<std::uint32_t>& order = chunks[j].table.order();
-                        auto it = std::partition_point(order.begin(), order.end(),
-                                                       [&](std::uint32_t s) { return ids[s] < r.begin(); });
-                        for (; it != order.end() && ids[*it] < r.end(); ++it) add(chunks[j], *it, ids[*it]);
-                      }
-                    });
+  merge_chunks(chunks, n, cells, add, [](std::uint32_t) {});
 }
+
+// An indexed pass's exact border sums, kept only for the cells where they do not cancel so far: the
+// original's borders, and interior edges whose other triangle is in a chunk not merged yet. Dense, they
+// would be the largest sums of a cell at the pass's memory peak, and in a coherent input they cancel within
+// a chunk or the next few for all but a few cells. One list per merge block, sorted by cell after each
+// merge; integer sums, so the order of additions does not matter.
+struct ExactEntry {
+  std::uint32_t cell;
+  ExactSums sums;
+};
+class SparseExactSums {
+ public:
+  explicit SparseExactSums(std::size_t cells)
+      : blocks_((cells + (1 << kMergeBlockBits) - 1) >> kMergeBlockBits) {}
+  // Only from the task merging the cell's block.
+  void add(std::uint32_t cell, const CellRecord& part) {
+    if (part.has_exact()) blocks_[cell >> kMergeBlockBits].push_back({cell, part.exact()});
+  }
+  // Merges the block's repeated cells and drops those whose sums cancelled.
+  void settle(std::uint32_t block) {
+    std::vector<ExactEntry>& v = blocks_[block];
+    if (v.empty()) return;
+    std::sort(v.begin(), v.end(), [](const ExactEntry& a, const ExactEntry& b) { return a.cell < b.cell; });
+    std::size_t out = 0;
+    for (std::size_t i = 0; i < v.size();) {
+      ExactEntry e = v[i];
+      for (++i; i < v.size() && v[i].cell == e.cell; ++i) add_wrapping(e.sums, v[i].sums);
+      if (!is_zero(e.sums)) v[out++] = e;
+    }
+    v.resize(out);
+    // Most of a merge's entries are chunks' shared edges that cancel right here: hand back what they took,
+    // or every block would keep the most a batch ever put in it.
+    if (v.capacity() > 4 * out + 16) v.shrink_to_fit();
+  }
+  // Writes the sums into `border` (one per cell, zero where absent).
+  void write(ZeroedVector<BorderSums>& border) const {
+    for (const std::vector<ExactEntry>& v : blocks_)
+      for (const ExactEntry& e : v) border[e.cell].exact = e.sums;
+  }
+
+ private:
+  std::vector<std::vector<ExactEntry>> blocks_;
+};
 
 FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options) {
   IndexedMesh& vertices = stream.scratch_vertices();
@@ -766,7 +871,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // The face pass's quadric sums take their fresh pages (faults, which this VM serves one at a time) on
   // another thread while this one builds the key -> cell map, in about the same time; the border sums wait
   // for the map to go, so that the two never add to the memory peak together.
-  CellStore store;
+  CellStore<std::int16_t> store;
   {
     tbb::task_group allocate;
     allocate.run([&] { store.quadrics.resize(count); });
@@ -811,7 +916,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // pages back before the face pass, the memory peak, allocates its own.
   malloc_trim(0);
 #endif
-  if (options.boundary) store.border.resize(count);
+  if (options.boundary) store.crease.resize(count);
+  SparseExactSums exact(count);
   // Face pass, in fixed chunks of each batch (see the top of this file).
   // About two distinct triangles per cell on a closed surface; repeats are few when cells are much larger
   // than triangles.
@@ -910,7 +1016,6 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     }
     constexpr std::size_t kBlock = 64;
     Facet facets[kBlock];
-    const double half_per_unit = 0.5 * grid.inverse_cell;
     for (std::size_t start = 0; start < crossing.size(); start += kBlock) {
       const int m = static_cast<int>(std::min(kBlock, crossing.size() - start));
       for (int b = 0; b < m; ++b) {
@@ -927,7 +1032,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         f.set_cross();
       }
       set_inverse_lengths(facets, m);
-      for (int b = 0; b < m; ++b) contribute(facets[b], chunk, half_per_unit, options.boundary);
+      for (int b = 0; b < m; ++b) contribute(facets[b], chunk, options.boundary);
     }
     chunk.sort_by_cell();
   };
@@ -939,10 +1044,14 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
       triangles.add_owners(n);
     }
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) { process(batch.triangles, j); });
-    merge_chunks(chunks.data(), n, count, [&](const FaceChunk& chunk, std::uint32_t s, std::uint32_t cell) {
-      store.add(cell, chunk.records[s]);
-      store.touch(cell);
-    });
+    merge_chunks(
+        chunks.data(), n, count,
+        [&](const FaceChunk& chunk, std::uint32_t s, std::uint32_t cell) {
+          store.add(cell, chunk.records[s]);
+          store.touch(cell);
+          if (options.boundary) exact.add(cell, chunk.records[s]);
+        },
+        [&](std::uint32_t block) { exact.settle(block); });
     for (std::size_t j = 0; j < n; ++j) cells.surviving_instances += chunks[j].survived;
   });
   std::vector<TriangleBuffer::Cursor> cursors;
@@ -952,7 +1061,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
 
   // What is averaged per vertex, from the packed vertices, in fixed chunks of the vertex array merged in
   // order: deferred to here so that these sums do not sit in memory through the face pass.
-  CellStore& sums = store;
+  CellStore<std::int16_t>& sums = store;
   sums.points.resize(count);  // zeros that take memory only as they are written
   sums.point_sum.resize(count);
   const bool normals = vertices.normals.size() == vertex_count;
@@ -1043,7 +1152,14 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // The stream is exhausted: its vertex array (the largest block of memory in play) is no longer needed.
   vertices = IndexedMesh();
 
-  store.move_into(cells, options.boundary);
+  store.move_into(cells);
+  if (options.boundary) {
+    cells.border.resize(count);
+    tbb::parallel_for(std::size_t{0}, count,
+                      [&](std::size_t i) { cells.border[i].crease = store.crease[i]; });
+    store.crease = {};
+    exact.write(cells.border);
+  }
   return cells;
 }
 
@@ -1069,7 +1185,7 @@ struct SoupChunk {
     return s;
   }
   Quadric& quadric(std::uint32_t s) { return records[s].quadric; }
-  BorderSums& border(std::uint32_t s) { return records[s].border; }
+  CellRecord& record(std::uint32_t s) { return records[s]; }
   void clear() {
     table.clear();
     records.clear();
@@ -1080,11 +1196,12 @@ struct SoupChunk {
 };
 
 // A soup pass's cells, numbered in order of first appearance, chunk by chunk: the numbering, like the sums,
-// follows the input alone.
+// follows the input alone. Its crease sums are 32-bit until the end of the pass: coarsening halves them,
+// which sums wrapped around 16 bits would not survive.
 struct SoupCells {
   CellMap map;
   std::vector<CellKey> keys;
-  CellStore store;
+  CellStore<std::int32_t> store;
 
   std::uint32_t number(CellKey key) {
     bool inserted;
@@ -1123,13 +1240,28 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
     const auto c = key_coords(cells.keys[i]);
     const Vec3f offset(static_cast<float>(c[0] & 1), static_cast<float>(c[1] & 1),
                        static_cast<float>(c[2] & 1));
-    CellRecord part = cells.store.record(static_cast<std::uint32_t>(i));
-    // A plane m.x + d = 0 in the child's cell units is m.x' + (d - m.offset) / 2 = 0 in the parent's.
-    for (std::array<float, 4>& t : part.border.slot) {
-      t[3] = 0.5f * (t[3] - (t[0] * offset.x() + t[1] * offset.y() + t[2] * offset.z()));
+    CellRecord part{};
+    part.quadric = cells.store.quadrics[i];
+    ExactSums exact = cells.store.exact[i];
+    CreaseSums<std::int32_t> crease = cells.store.crease[i];
+    // The child's frame is y = 2 y' - offset in the parent's. u and m are the same in any frame;
+    // y' x u = (y x u + offset x u) / 2 and -m . y' = (-m . y - m . offset) / 2, rounded back to whole units
+    // (ties to even) from the exact totals.
+    const double o[3] = {offset.x(), offset.y(), offset.z()};
+    for (std::array<std::int32_t, 6>& x : exact) {
+      const double u[3] = {static_cast<double>(x[0]), static_cast<double>(x[1]), static_cast<double>(x[2])};
+      x[3] = static_cast<std::int32_t>(fixed_point(0.5 * (x[3] + (o[1] * u[2] - o[2] * u[1]))));
+      x[4] = static_cast<std::int32_t>(fixed_point(0.5 * (x[4] + (o[2] * u[0] - o[0] * u[2]))));
+      x[5] = static_cast<std::int32_t>(fixed_point(0.5 * (x[5] + (o[0] * u[1] - o[1] * u[0]))));
     }
+    for (std::array<std::int32_t, 4>& w : crease) {
+      const double mo = (w[0] * o[0] + w[1] * o[1]) + w[2] * o[2];
+      w[3] = static_cast<std::int32_t>(fixed_point(0.5 * (w[3] - mo)));
+    }
+    part.set_border(exact, crease);
     const std::uint32_t points = cells.store.points[i];
-    parents.add(parents.number(parent_key(cells.keys[i])), part, CellStore::touched(part.quadric), points,
+    parents.add(parents.number(parent_key(cells.keys[i])), part,
+                CellStore<std::int32_t>::touched(part.quadric), points,
                 0.5f * (cells.store.point_sum[i] + static_cast<float>(points) * offset));
   }
   std::vector<CellTriple<CellKey>> triples;
@@ -1165,7 +1297,6 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     }
     const std::size_t n = (batch.corners.size() + kChunkTriangles - 1) / kChunkTriangles;
     if (chunks.size() < n) chunks.resize(n);
-    const double half_per_unit = 0.5 * grid.inverse_cell;  // the grid coarsens between batches
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
       SoupChunk& chunk = chunks[j];
       chunk.clear();
@@ -1187,7 +1318,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
         }
         f.set_cross();
         set_inverse_lengths(&f, 1);
-        contribute(f, chunk, half_per_unit, options.boundary);
+        contribute(f, chunk, options.boundary);
         if (key[0] != key[1] && key[1] != key[2] && key[2] != key[0]) {
           chunk.survivors.push_back(CellTriple<CellKey>::of(key[0], key[1], key[2]));
         }
@@ -1213,7 +1344,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   chunks = {};
   seen.map = CellMap();
   std::vector<CellKey>& keys = seen.keys;
-  CellStore& store = seen.store;
+  CellStore<std::int32_t>& store = seen.store;
 
   // Number the cells in Morton order.
   const std::size_t count = keys.size();
@@ -1221,9 +1352,9 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   for (std::size_t i = 0; i < count; ++i) entries[i] = {morton(keys[i]), static_cast<std::uint32_t>(i)};
   tbb::parallel_sort(entries.begin(), entries.end());
   cells.keys.resize(count);
-  CellStore sorted;
+  CellStore<std::int32_t> sorted;
   sorted.quadrics.resize(count);
-  sorted.border.resize(count);
+  if (options.boundary) cells.border.resize(count);
   sorted.points.resize(count);
   sorted.point_sum.resize(count);
   CellMap numbering(count);
@@ -1231,7 +1362,10 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     const std::uint32_t from = entries[i].second;
     cells.keys[i] = keys[from];
     sorted.quadrics[i] = store.quadrics[from];
-    sorted.border[i] = store.border[from];
+    if (options.boundary) {
+      cells.border[i].exact = store.exact[from];
+      add_wrapping(cells.border[i].crease, store.crease[from]);
+    }
     sorted.points[i] = store.points[from];
     sorted.point_sum[i] = store.point_sum[from];
     bool inserted;
@@ -1251,7 +1385,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     cells.triangles.push_back(t3);
   }
   tbb::parallel_sort(cells.triangles.begin(), cells.triangles.end());
-  sorted.move_into(cells, options.boundary);
+  sorted.move_into(cells);
   return cells;
 }
 

@@ -18,14 +18,27 @@ namespace ocsimp::cluster_detail {
 
 using Vec2d = Eigen::Vector2d;
 
-// Border planes accumulated in a cell, one slot per direction class of the edge (its dominant axis): for
-// each edge crossing into or out of the cell, the unit normal m of the plane through the edge perpendicular
-// to its triangle (m = edge direction x triangle normal) and the plane's offset w = -m . (edge midpoint),
-// taken in the cell's frame (cell units from its lower corner). Opposite half-edges of an interior edge fall
-// in the same slot with opposite signs and cancel; floats are enough for that (the residue is ~1e-7 of the
-// crossings), doubles would cost 48 more bytes a cell.
+// Border sums of a cell, one slot per direction class of the edge (its dominant axis), for every edge
+// crossing into or out of the cell, in fixed point in the cell's frame (cell units from its lower corner).
+// With u the edge's unit direction, y its end in the cell and n its triangle's unit normal:
+// - `exact`: the sums of u and of y x u, kExactScale units to 1. The two half-edges of an interior edge add
+//   exactly opposite integers, so only the original's open borders are left, in any order of addition; with
+//   the cell's normal N the border plane is (sum u) x N . y - N . sum(y x u) = 0.
+// - `crease`: the sums of m = u x n, the normal of the plane through the edge perpendicular to its triangle,
+//   and of its offset -m . y, kCreaseScale units to 1. Interior edges cancel here only up to the difference
+//   of their two triangles' normals: what creases leave, which placement uses as feature planes.
+// Integer sums wrap around, harmlessly as long as the totals fit (2048 units for the exact sums, 32 for the
+// crease sums): every term is under 2 units (|y x u| and |m . y| are at most the distance from the corner to
+// the edge's line, which passes through the cell), and what survives is the borders and creases crossing
+// the cell, a few terms per slot. The exact sums need the finer units: their rounding moves a border plane.
+inline constexpr double kExactScale = 1048576.0;
+inline constexpr double kCreaseScale = 1024.0;
+using ExactSums = std::array<std::array<std::int32_t, 6>, 3>;
+template <class T>
+using CreaseSums = std::array<std::array<T, 4>, 3>;
 struct BorderSums {
-  std::array<std::array<float, 4>, 3> slot{};
+  ExactSums exact{};
+  CreaseSums<std::int16_t> crease{};
 };
 
 using CellTriangle = CellTriple<std::uint32_t>;
@@ -66,7 +79,7 @@ struct FineCells {
   // Per occupied cell, in ascending Morton order of `keys`:
   std::vector<CellKey> keys;
   std::vector<Quadric> quadrics;       // area-weighted plane quadrics, once per triangle corner in the cell
-  std::vector<BorderSums> border;      // empty when boundary preservation is off
+  ZeroedVector<BorderSums> border;     // empty when boundary preservation is off
   std::vector<std::uint8_t> touched;   // 1 when some triangle has a corner in the cell
   ZeroedVector<std::uint32_t> points;  // vertices (indexed input) or triangle corners (soups) averaged in
   ZeroedVector<Vec3f> point_sum;       // their sum, in the cell's frame (cell units from its lower corner)

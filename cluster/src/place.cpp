@@ -47,16 +47,30 @@ bool inside(const Vec3d& p, const Box3& box) {
   return true;
 }
 
-// The power of a border slot's along-surface fraction that its carried plane is weighted by. The carried
-// planes are to be the original's borders alone. The sums also hold what creases leave (interior edges whose
-// two planes do not cancel), which placing a cluster's vertex wants, but the decimator's face quadrics
-// already hold both sides of a crease, and the pure decimator adds no crease planes of its own. A border's
-// summed normal lies in the surface, a crease's along its normal, so the fraction along the surface tells
-// them apart; a high power of it is a switch without a threshold to flip. Measured two-stage RMS over pure
-// decimation's at 0.1 % (horse, rocker-arm, bunny): 1.109, 1.163, 0.953 with crease planes carried; power 4:
-// 0.994, 1.162, 0.951; 8: 1.022, 0.926, 0.908; 16: 0.968, 1.150, 0.941 (rocker-arm at 20 faces swings with
-// any change); at 1 % about 1 % better (horse, bunny) and 6 % (rocker-arm).
-constexpr double kCarriedTangentPower = 8.0;
+// Power-iteration steps for a cell's normal: the other eigenvectors' share of the start falls by (l2 / l1)^5,
+// to 3 % where l2 = l1 / 2.
+constexpr int kPowerSteps = 4;
+
+// How fast a slot's crease plane fades once a border crosses the slot: the factor is 1 / (1 + k c), with c
+// the squared length of the exact border normal (about 1 per crossing, exactly 0 where interior edges
+// cancel). A switch scale, not a fitted value: any k from 1e2 to 1e8 does the same.
+constexpr double kCrossingFade = 100.0;
+
+// The unit eigenvector of the largest eigenvalue of a positive semi-definite a (zero if a is zero), by power
+// iteration from a's column of largest diagonal: for the near rank-one quadric of a flat cell that column is
+// already along the normal, and each step shrinks the rest by the ratio of the two largest eigenvalues. A
+// tenth of a full eigen-decomposition, which every cell's placement needs on top of this.
+Vec3d dominant_direction(const Eigen::Matrix3d& a) {
+  int j = 0;
+  if (a(1, 1) > a(j, j)) j = 1;
+  if (a(2, 2) > a(j, j)) j = 2;
+  if (!(a(j, j) > 0.0) || !std::isfinite(a(j, j))) return Vec3d::Zero();
+  const Eigen::Matrix3d unit = a * (1.0 / a(j, j));  // entries at most 1: the powers stay in range
+  Vec3d v = unit.col(j);
+  for (int step = 0; step < kPowerSteps; ++step) v = unit * v;
+  const double length = v.norm();
+  return length > 0.0 ? Vec3d(v / length) : Vec3d::Zero();
+}
 
 // Triangles around a vertex of a closed mesh, on average (Euler: E = 3V, F = 2V).
 constexpr double kCornersPerVertex = 6.0;
@@ -80,26 +94,41 @@ BorderQuadrics border_quadrics(const BorderSums& border, const Grid& grid, CellK
   // triangles' mean normal (for unit normals n1, n2 both perpendicular to the edge e, e x (n1 - n2) is
   // parallel to n1 + n2), so along the surface normal, be it curvature or scanner noise; a border's plane
   // normal lies in the surface. Only the part of a slot's normal along the surface counts.
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-  solver.computeDirect(surface.a());
-  if (!(solver.eigenvalues()(2) > 0.0)) return q;
-  const Vec3d normal = solver.eigenvectors().col(2);
+  const Vec3d normal = dominant_direction(surface.a());
+  if (!(normal.squaredNorm() > 0.0)) return q;
   const Vec3d origin = grid.cell_origin(key);
-  for (const auto& s : border.slot) {
-    const Vec3d m(s[0], s[1], s[2]);
-    const double length = m.norm();
-    if (!(length > 0.0)) continue;
+  // The plane n . (x - origin) / cell + w / |m| = 0 of slot sums (m, w) taken in the cell's frame.
+  auto plane = [&](const Vec3d& m, double w, double length) {
     const Vec3d n = m / length;
-    const double along_surface = (m - m.dot(normal) * normal).squaredNorm();
-    // n . (x - origin) / cell + w / length = 0, in world units. The weight grows with the square of what is
-    // left: one border crossing leaves 1, the cancellation of interior edges ~1e-6 of float residue. No
-    // threshold, so nothing flips when sums are taken in another order.
-    const double d = grid.cell * s[3] / length - n.dot(origin);
-    q.placement += Quadric::plane(n, d, weight * along_surface * grid.cell * grid.cell);
-    if (carried_weight > 0) {
-      const double tangent = std::pow(along_surface / (length * length), kCarriedTangentPower);
-      q.carried += Quadric::plane(n, d, carried_weight * along_surface * tangent * grid.cell * grid.cell);
+    return std::pair<Vec3d, double>(n, grid.cell * w / length - n.dot(origin));
+  };
+  const double area = weight * grid.cell * grid.cell;
+  for (int k = 0; k < 3; ++k) {
+    const auto& x = border.exact[k];
+    const auto& c = border.crease[k];
+    // The exact border: interior edges cancelled, so this is the original's open border alone (none in
+    // most slots, exactly).
+    double length = 0;
+    Vec3d m = Vec3d::Zero();
+    if ((x[0] | x[1] | x[2]) != 0) {
+      m = (Vec3d(x[0], x[1], x[2]) * (1.0 / kExactScale)).cross(normal);
+      length = m.norm();
     }
+    // What interior edges leave in the crease sums (creases, and noise), where no border crosses the slot.
+    if ((c[0] | c[1] | c[2]) != 0) {
+      const Vec3d mr = Vec3d(c[0], c[1], c[2]) * (1.0 / kCreaseScale);
+      const double lr = mr.norm();
+      const auto [n, d] = plane(mr, c[3] * (1.0 / kCreaseScale), lr);
+      const double along = (mr - mr.dot(normal) * normal).squaredNorm();
+      const double fade = length > 0 ? 1.0 / (1.0 + kCrossingFade * length * length) : 1.0;
+      q.placement += Quadric::plane(n, d, area * along * fade);
+    }
+    if (!(length > 0.0)) continue;
+    const Vec3d sw = Vec3d(x[3], x[4], x[5]) * (1.0 / kExactScale);
+    const auto [n, d] = plane(m, -normal.dot(sw), length);
+    q.placement += Quadric::plane(n, d, area * length * length);
+    if (carried_weight > 0)
+      q.carried += Quadric::plane(n, d, carried_weight * length * length * grid.cell * grid.cell);
   }
   return q;
 }

@@ -39,13 +39,12 @@ struct PlacementSums {
   double edge_length() const { return corners > 0 ? equilateral_edge(corner_area / corners) : 0; }
 };
 
-// The border planes of a cell as quadrics: each direction slot whose planes did not cancel becomes the plane
-// of their summed normal and offset, weighted by cell_size^2 x the squared length of that normal's component
-// along the surface (`surface`: the cell's quadric, whose dominant eigenvector is taken as the surface
-// normal), times `weight` for placing the cell's vertex. With `carried_weight` > 0 also the planes the output
-// quadric carries into a decimator: times `carried_weight` and a high power of the fraction of the normal
-// that lies along the surface, which is 1 for a border and near 0 for what a crease leaves (see place.cpp).
-// One eigen-decomposition serves both.
+// The border planes of a cell as quadrics (see BorderSums), for placing the cell's vertex, times `weight`: in
+// each slot the exact border plane, weighted by cell_size^2 x the squared length of its normal, and the
+// crease plane of the crease sums, weighted by cell_size^2 x the squared length of its normal's component
+// along the surface and faded where a border crosses the slot (`surface`: the cell's quadric, whose dominant
+// eigenvector is taken as the surface normal). With `carried_weight` > 0 also the planes the output quadric
+// carries into a decimator: the exact border planes alone, weighted as above but by `carried_weight`.
 struct BorderQuadrics {
   Quadric placement;
   Quadric carried;
