@@ -67,9 +67,9 @@ std::uint64_t quantize(const Vec3d& local) {
   }
   return q;
 }
-// Axis a's offset in quanta.
+// Axis a's offset in quanta. quantize() leaves bit 63 clear, so the last axis needs no mask.
 std::int64_t quantum(std::uint64_t q, int a) {
-  return static_cast<std::int64_t>((q >> (21 * a)) & kQuantumMax);
+  return static_cast<std::int64_t>(a == 2 ? q >> 42 : (q >> (21 * a)) & kQuantumMax);
 }
 // (Through int32: converting an unsigned 64-bit integer to double costs a branch on x86-64 before AVX-512.)
 Vec3d dequantize(std::uint64_t q) {
@@ -231,34 +231,53 @@ struct CellStore {
 
 // The area-weighted plane quadric of a triangle with unnormalized normal c (|c| = twice the area) and
 // offset dc = -c . p0: every coefficient is a product of c and dc over 2|c|, so one square root and one
-// division serve all ten. Kept as plain numbers so that adding it to a cell is ten adds.
-struct TriangleQuadric {
-  double v[10];
-  // `s` = 1 / (2 |c|).
-  TriangleQuadric(const Vec3d& c, double dc, double s) : TriangleQuadric(c.x(), c.y(), c.z(), dc, s) {}
-  TriangleQuadric(double x, double y, double z, double dc, double s) {
-    const double sx = s * x, sy = s * y, sz = s * z, sd = s * dc;
-    v[0] = sx * x;
-    v[1] = sx * y;
-    v[2] = sx * z;
-    v[3] = sy * y;
-    v[4] = sy * z;
-    v[5] = sz * z;
-    v[6] = sd * x;
-    v[7] = sd * y;
-    v[8] = sd * z;
-    v[9] = sd * dc;
+// division serve all ten. Held as five pairs in Quadric's order, (a00 a01) (a02 a11) (a12 a22) (b0 b1)
+// (b2 c): each pair is one vector multiply and one vector add, the same products and sums lane by lane.
+static_assert(sizeof(Quadric) == 10 * sizeof(double), "a quadric is five pairs of doubles");
+// Five named pairs rather than an array, which the compiler kept on the stack instead of in registers.
+struct QuadricPairs {
+  Pair p0, p1, p2, p3, p4;
+
+  static Pair load(const Quadric& q, int i) {
+    Pair v;
+    std::memcpy(&v, reinterpret_cast<const char*>(&q) + sizeof(Pair) * i, sizeof(Pair));
+    return v;
   }
-  [[gnu::always_inline]] void add_to(Quadric& q, int multiplicity) const {
+  static void store(Quadric& q, int i, Pair v) {
+    std::memcpy(reinterpret_cast<char*>(&q) + sizeof(Pair) * i, &v, sizeof(Pair));
+  }
+  static QuadricPairs of(const Quadric& q) {
+    return {load(q, 0), load(q, 1), load(q, 2), load(q, 3), load(q, 4)};
+  }
+  void store(Quadric& q) const {
+    store(q, 0, p0), store(q, 1, p1), store(q, 2, p2), store(q, 3, p3), store(q, 4, p4);
+  }
+};
+struct TriangleQuadric {
+  QuadricPairs v;
+  // `s` = 1 / (2 |c|).
+  TriangleQuadric(double x, double y, double z, double dc, double s) {
+    const Pair xy = {x, y}, zd = {z, dc};
+    const Pair sxy = s * xy, szd = s * zd;  // sx sy, sz sd
+    const Pair sx = __builtin_shufflevector(sxy, sxy, 0, 0), sd = __builtin_shufflevector(szd, szd, 1, 1);
+    v.p0 = sx * xy;                                                                          // sx x, sx y
+    v.p1 = sxy * __builtin_shufflevector(zd, xy, 0, 3);                                      // sx z, sy y
+    v.p2 = __builtin_shufflevector(sxy, szd, 1, 2) * __builtin_shufflevector(zd, zd, 0, 0);  // sy z, sz z
+    v.p3 = sd * xy;                                                                          // sd x, sd y
+    v.p4 = sd * zd;                                                                          // sd z, sd dc
+  }
+  [[gnu::always_inline]] void add_to(QuadricPairs& q, int multiplicity) const {
     if (multiplicity == 1) {
-      q.a00 += v[0], q.a01 += v[1], q.a02 += v[2], q.a11 += v[3], q.a12 += v[4], q.a22 += v[5];
-      q.b0 += v[6], q.b1 += v[7], q.b2 += v[8], q.c += v[9];
+      q.p0 += v.p0, q.p1 += v.p1, q.p2 += v.p2, q.p3 += v.p3, q.p4 += v.p4;
     } else {
       const double m = multiplicity;
-      q.a00 += m * v[0], q.a01 += m * v[1], q.a02 += m * v[2], q.a11 += m * v[3], q.a12 += m * v[4],
-          q.a22 += m * v[5];
-      q.b0 += m * v[6], q.b1 += m * v[7], q.b2 += m * v[8], q.c += m * v[9];
+      q.p0 += m * v.p0, q.p1 += m * v.p1, q.p2 += m * v.p2, q.p3 += m * v.p3, q.p4 += m * v.p4;
     }
+  }
+  [[gnu::always_inline]] void add_to(Quadric& q, int multiplicity) const {
+    QuadricPairs sum = QuadricPairs::of(q);
+    add_to(sum, multiplicity);
+    sum.store(q);
   }
 };
 
@@ -546,13 +565,18 @@ class ChunkTable {
   std::uint32_t slot(Key cell, bool& inserted) {
     inserted = false;
     if (cell == last_cell_) return last_slot_;
-    if (2 * (ids_.size() + 1) > table_.size()) rehash(2 * table_.size());
     std::size_t i = hash(cell);
     for (; table_[i].key != kEmpty; i = (i + 1) & mask_) {
       if (table_[i].key == cell) {
         last_cell_ = cell;
         last_slot_ = table_[i].slot;
         return last_slot_;
+      }
+    }
+    // Grown only when a cell is added, which most lookups do not.
+    if (2 * (ids_.size() + 1) > table_.size()) {
+      rehash(2 * table_.size());
+      for (i = hash(cell); table_[i].key != kEmpty; i = (i + 1) & mask_) {
       }
     }
     const auto local = static_cast<std::uint32_t>(ids_.size());
@@ -954,7 +978,11 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     if (flats.size() < size) flats.resize(size);
     crossing.clear();
     FaceChunk::Flat* flat = flats.data();
-    const double area_unit = grid.cell * grid.cell;
+    // Powers of two folded into the cell's constants once per chunk: scaling by one is exact, so
+    // cell * (x * 2^-21) and (cell * 2^-21) * x round the same (no product here comes near the subnormals: a
+    // cell is at least the float box's extent over 2^21, or the box is one point and every offset zero).
+    const double area_scale = grid.cell * grid.cell * (1.0 / (kQuantum * kQuantum));
+    const double quantum_size = grid.cell * (1.0 / kQuantum);
     for (std::uint32_t i = 0; i < size; ++i) {
       const FaceChunk::Corners& g = gathered[i];
       const std::uint32_t(&cell)[3] = g.cell;
@@ -974,17 +1002,14 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
                            az = quantum(g.q[1], 2) - z0;
         const std::int64_t bx = quantum(g.q[2], 0) - x0, by = quantum(g.q[2], 1) - y0,
                            bz = quantum(g.q[2], 2) - z0;
-        constexpr double kArea = 1.0 / (kQuantum * kQuantum);
-        const double cx = area_unit * (static_cast<double>(ay * bz - az * by) * kArea);
-        const double cy = area_unit * (static_cast<double>(az * bx - ax * bz) * kArea);
-        const double cz = area_unit * (static_cast<double>(ax * by - ay * bx) * kArea);
+        const double cx = area_scale * static_cast<double>(ay * bz - az * by);
+        const double cy = area_scale * static_cast<double>(az * bx - ax * bz);
+        const double cz = area_scale * static_cast<double>(ax * by - ay * bx);
         f.cross[0] = cx, f.cross[1] = cy, f.cross[2] = cz;
         const Vec3d& o = chunk.origin(f.slot);
-        const double l0x = static_cast<double>(x0) * (1.0 / kQuantum),
-                     l0y = static_cast<double>(y0) * (1.0 / kQuantum),
-                     l0z = static_cast<double>(z0) * (1.0 / kQuantum);
-        f.offset = -(cx * (o.x() + grid.cell * l0x) + cy * (o.y() + grid.cell * l0y) +
-                     cz * (o.z() + grid.cell * l0z));
+        f.offset = -(cx * (o.x() + quantum_size * static_cast<double>(x0)) +
+                     cy * (o.y() + quantum_size * static_cast<double>(y0)) +
+                     cz * (o.z() + quantum_size * static_cast<double>(z0)));
         continue;
       }
       crossing.push_back(i);
@@ -1002,17 +1027,17 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
       // Runs of triangles in one cell add to a quadric held in registers (the same additions in the same
       // order), stored when the cell changes.
       std::uint32_t current = ~std::uint32_t{0};
-      Quadric sum;
+      QuadricPairs sum;
       for (const FaceChunk::Flat& f : in_one_cell) {
         if (!(f.squared > 0.0 && f.squared <= std::numeric_limits<double>::max())) continue;
         if (f.slot != current) {
-          if (current != ~std::uint32_t{0}) chunk.quadric(current) = sum;
+          if (current != ~std::uint32_t{0}) sum.store(chunk.quadric(current));
           current = f.slot;
-          sum = chunk.quadric(current);
+          sum = QuadricPairs::of(chunk.quadric(current));
         }
         TriangleQuadric(f.cross[0], f.cross[1], f.cross[2], f.offset, f.scale).add_to(sum, 3);
       }
-      if (current != ~std::uint32_t{0}) chunk.quadric(current) = sum;
+      if (current != ~std::uint32_t{0}) sum.store(chunk.quadric(current));
     }
     constexpr std::size_t kBlock = 64;
     Facet facets[kBlock];
