@@ -27,6 +27,9 @@
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include <algorithm>
 #include <atomic>
@@ -54,7 +57,21 @@ static_assert(sizeof(Vec3f) == 12, "packed vertices reuse a position's 12 bytes"
 
 std::uint64_t quantize(const Vec3d& local) {
   std::uint64_t q = 0;
-  for (int a = 0; a < 3; ++a) {
+  int a = 0;
+#ifdef __SSE2__
+  // x and y in one vector, each lane the loop's value below: max(s, 0) is 0 for s <= 0 and for NaN (maxpd
+  // returns its second operand then), and min(., kQuantumMax) is the clamp (kQuantumMax + 0.5 truncates
+  // to kQuantumMax).
+  const __m128d s = _mm_mul_pd(_mm_loadu_pd(local.data()), _mm_set1_pd(kQuantum));
+  const __m128d clamped =
+      _mm_min_pd(_mm_max_pd(s, _mm_setzero_pd()), _mm_set1_pd(static_cast<double>(kQuantumMax)));
+  const __m128i v = _mm_cvttpd_epi32(_mm_add_pd(clamped, _mm_set1_pd(0.5)));
+  q = static_cast<std::uint32_t>(_mm_cvtsi128_si32(v)) |
+      static_cast<std::uint64_t>(static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm_shuffle_epi32(v, 1))))
+          << 21;
+  a = 2;
+#endif
+  for (; a < 3; ++a) {
     const double s = local[a] * kQuantum;
     std::uint64_t v = 0;
     if (s >= static_cast<double>(kQuantumMax)) {
@@ -412,14 +429,14 @@ bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions
                       const Grid local_grid = grid;
                       CellKey last = kNoKey;  // runs of vertices share a cell
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                        const Vec3d p = positions[i].cast<double>();
+                        const Vec3f& p = positions[i];
                         if (!p.allFinite()) {
                           std::size_t seen = first_bad.load();
                           while (i < seen && !first_bad.compare_exchange_weak(seen, i)) {
                           }
                           continue;
                         }
-                        const CellKey key = local_grid.locate(p);
+                        const CellKey key = local_grid.locate_float(p);
                         if (key == last) continue;
                         last = key;
                         if (recent.find(key) == CellMap::kMissing) {
@@ -919,7 +936,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
                           std::uint32_t cell = 0;
                           for (std::size_t v = r.begin(); v != r.end(); ++v) {
                             Vec3d local;
-                            const CellKey key = local_grid.locate(positions[v].cast<double>(), local);
+                            const CellKey key = local_grid.locate_float(positions[v], local);
                             if (key != last_key) {
                               last_key = key;
                               cell = recent.find(key);

@@ -5,6 +5,10 @@
 #include <cmath>
 #include <cstdint>
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include "ocsimp/core/types.h"
 
 namespace ocsimp::cluster_detail {
@@ -75,8 +79,51 @@ struct Grid {
   // The cell holding p (clamped into the grid, which also catches NaN) and p's offset inside it in cell
   // units.
   CellKey locate(const Vec3d& p, Vec3d& local) const {
-    std::uint64_t c[3];
-    for (int a = 0; a < 3; ++a) {
+#ifdef __SSE2__
+    return locate(_mm_loadu_pd(p.data()), p.z(), local);
+#else
+    return locate_axes(p, local, 0);
+#endif
+  }
+  CellKey locate(const Vec3d& p) const {
+    Vec3d local;
+    return locate(p, local);
+  }
+  // The same for a float point (an input vertex), converted exactly. Named apart: Eigen expressions convert
+  // to either vector type, so overloads would be ambiguous for them.
+  CellKey locate_float(const Vec3f& p, Vec3d& local) const {
+#ifdef __SSE2__
+    return locate(_mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p.data())))),
+                  static_cast<double>(p.z()), local);
+#else
+    return locate(Vec3d(p.cast<double>()), local);
+#endif
+  }
+  CellKey locate_float(const Vec3f& p) const {
+    Vec3d local;
+    return locate_float(p, local);
+  }
+#ifdef __SSE2__
+  // x and y in the two lanes of one vector, each lane the scalar path's value: max(t, 0) is 0 for t <= 0 and
+  // for NaN (maxpd returns its second operand then), min(., dims - 1) is the clamp above, and truncation the
+  // floor of what is left.
+  CellKey locate(__m128d xy, double z, Vec3d& local) const {
+    const __m128d t = _mm_mul_pd(_mm_sub_pd(xy, _mm_loadu_pd(origin.data())), _mm_set1_pd(inverse_cell));
+    const __m128d top = _mm_set_pd(static_cast<double>(dims[1] - 1), static_cast<double>(dims[0] - 1));
+    const __m128i i = _mm_cvttpd_epi32(_mm_min_pd(_mm_max_pd(t, _mm_setzero_pd()), top));
+    _mm_storeu_pd(local.data(), _mm_sub_pd(t, _mm_cvtepi32_pd(i)));
+    const Vec3d p(0.0, 0.0, z);
+    const CellKey z_key = locate_axes(p, local, 2);
+    const auto x = static_cast<std::uint32_t>(_mm_cvtsi128_si32(i));
+    const auto y = static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm_shuffle_epi32(i, 1)));
+    return z_key | make_key(x, y, 0);
+  }
+#endif
+  // Axes `first` to 2 of locate(), one at a time: the key holds zeros and `local` keeps its values for the
+  // axes before.
+  CellKey locate_axes(const Vec3d& p, Vec3d& local, int first) const {
+    std::uint64_t c[3] = {0, 0, 0};
+    for (int a = first; a < 3; ++a) {
       const double t = (p[a] - origin[a]) * inverse_cell;
       // Truncation is the floor for t >= 0 and, unlike std::floor without SSE4.1, needs no library call.
       std::uint64_t i = 0;
@@ -90,10 +137,6 @@ struct Grid {
       local[a] = t - static_cast<double>(i);
     }
     return make_key(c[0], c[1], c[2]);
-  }
-  CellKey locate(const Vec3d& p) const {
-    Vec3d local;
-    return locate(p, local);
   }
   Vec3d cell_origin(CellKey key) const {
     const auto c = key_coords(key);
