@@ -998,8 +998,21 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     // Powers of two folded into the cell's constants once per chunk: scaling by one is exact, so
     // cell * (x * 2^-21) and (cell * 2^-21) * x round the same (no product here comes near the subnormals: a
     // cell is at least the float box's extent over 2^21, or the box is one point and every offset zero).
+    const double cell_size = grid.cell;
     const double area_scale = grid.cell * grid.cell * (1.0 / (kQuantum * kQuantum));
     const double quantum_size = grid.cell * (1.0 / kQuantum);
+    // The last cell looked up, its chunk number and origin: runs of triangles share a cell, and this skips
+    // the table (whose own last-cell check sits behind a call) for them.
+    std::uint32_t run_cell = ~std::uint32_t{0}, run_slot = 0;
+    Vec3d run_origin = Vec3d::Zero();
+    auto slot_of = [&](std::uint32_t cell) {
+      if (cell != run_cell) {
+        run_cell = cell;
+        run_slot = chunk.slot(cell, cells.keys, grid);
+        run_origin = chunk.origin(run_slot);
+      }
+      return run_slot;
+    };
     for (std::uint32_t i = 0; i < size; ++i) {
       const FaceChunk::Corners& g = gathered[i];
       const std::uint32_t(&cell)[3] = g.cell;
@@ -1009,7 +1022,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         // In scalars: Eigen's 3-vector temporaries here were stored as two halves and reloaded as one
         // packet, a store-forwarding stall that took about a tenth of this loop's time.
         FaceChunk::Flat& f = *flat++;
-        f.slot = chunk.slot(cell[0], cells.keys, grid);
+        f.slot = slot_of(cell[0]);
         // The cross product in quanta, exactly, in integers: every difference and product of two quantized
         // offsets is exact in double as well, so this is bit for bit what the same formula gives on the
         // dequantized offsets (but for the sign of a zero, which no sum keeps), with three conversions
@@ -1023,7 +1036,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         const double cy = area_scale * static_cast<double>(az * bx - ax * bz);
         const double cz = area_scale * static_cast<double>(ax * by - ay * bx);
         f.cross[0] = cx, f.cross[1] = cy, f.cross[2] = cz;
-        const Vec3d& o = chunk.origin(f.slot);
+        const Vec3d& o = run_origin;
         f.offset = -(cx * (o.x() + quantum_size * static_cast<double>(x0)) +
                      cy * (o.y() + quantum_size * static_cast<double>(y0)) +
                      cz * (o.z() + quantum_size * static_cast<double>(z0)));
@@ -1064,11 +1077,11 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         const FaceChunk::Corners& g = gathered[crossing[start + b]];
         Facet& f = facets[b];
         for (int k = 0; k < 3; ++k) {
-          f.index[k] = chunk.slot(g.cell[k], cells.keys, grid);
-          const Vec3d& o = chunk.origin(f.index[k]);
+          f.index[k] = slot_of(g.cell[k]);
+          const Vec3d& o = run_origin;
           for (int a = 0; a < 3; ++a) {
             f.local[k][a] = static_cast<double>(quantum(g.q[k], a)) * (1.0 / kQuantum);
-            f.p[k][a] = o[a] + grid.cell * f.local[k][a];
+            f.p[k][a] = o[a] + cell_size * f.local[k][a];
           }
         }
         f.set_cross();
