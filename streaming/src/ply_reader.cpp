@@ -1149,6 +1149,8 @@ void PlyStream::read_triangle_records() {
   constexpr std::size_t kRecord = sizeof(CountT) + 3 * sizeof(IndexT);
   const std::uint64_t count = header_.elements[face_element_].count;
   const std::uint64_t vertex_count = vertex_count_;
+  // A negative index converts to an Index of at least 2^31, which the range check then catches by itself.
+  const bool negatives_wrap = vertex_count <= (std::uint64_t{1} << 31);
   while (filled_ < capacity_ && current_record_ < count) {
     std::size_t available = reader_.available();
     if (available < kRecord) {
@@ -1172,7 +1174,7 @@ void PlyStream::read_triangle_records() {
       const IndexT c = load<IndexT, Swap>(p + sizeof(CountT) + 2 * sizeof(IndexT));
       const Triangle t = {static_cast<Index>(a), static_cast<Index>(b), static_cast<Index>(c)};
       bool bad = std::max({t[0], t[1], t[2]}) >= vertex_count;
-      if constexpr (std::is_signed_v<IndexT>) bad |= (a | b | c) < 0;
+      if constexpr (std::is_signed_v<IndexT>) bad |= !negatives_wrap && (a | b | c) < 0;
       if (bad) [[unlikely]] {
         const std::uint64_t record_offset = reader_.offset() + static_cast<std::uint64_t>(p - begin);
         current_record_ += done;
