@@ -25,10 +25,11 @@
 //
 // Memory (indexed inputs): the reader's 12 bytes a vertex, which the pass reuses in place to hold each
 // vertex's cell and its position inside the cell (see TriangleStream::scratch_vertices()) and releases once
-// the stream is exhausted, plus about 165 bytes per occupied cell during the pass (a 128-byte record of the
-// quadric and the border planes, the cell's key, its share of the surviving triangles) and 16 more after it
-// (the vertex sums, gathered only once the vertex array is being released). On the 100 M-triangle benchmark
-// that is 15.7 bytes per input vertex all told. The octree and `target_faces` modes hold
+// the stream is exhausted, plus per occupied cell during the pass its quadric and crease sums (104 bytes),
+// its key and its share of the surviving triangles (the exact border sums are kept only where they do not
+// cancel, which is along the open borders), and 16 more after it (the vertex sums, gathered only once the
+// vertex array is being released). On the 100 M-triangle benchmark the peak is 15.4 bytes per input vertex
+// all told: 12 per vertex and about 170 per occupied cell. The octree and `target_faces` modes hold
 // `fine_cells_per_target` times more cells than they output while they merge.
 #pragma once
 
