@@ -1739,6 +1739,8 @@ struct Decimator {
     // time (walking all 2^18 cells was about 1 % of a 70 k-triangle decimation's instructions).
     std::vector<std::uint32_t>& cells = scratch.cells;
     cells.assign(kCells + 1, 0u);
+    // One word more than the walk reads: the vertices without faces (id kCells) set a bit in word
+    // kCells / 64, which the walk leaves alone (their entry is set after it).
     std::vector<std::uint64_t> occupied(kCells / 64 + 1, 0);
     for (std::size_t v = 0; v < nv; ++v) {
       const std::uint32_t c = ids[v];
