@@ -1,6 +1,8 @@
 #include "grid.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "ocsimp/core/error.h"
@@ -56,8 +58,13 @@ Grid Grid::sized(const Box3& bounds, double size) {
   if (!(size > 0.0) || !std::isfinite(size)) throw Error("cell size must be a positive number");
   const double length = longest(bounds);
   if (length / size > static_cast<double>(kMaxCellsPerAxis)) {
-    throw Error("cell size " + std::to_string(size) + " gives more than " + std::to_string(kMaxCellsPerAxis) +
-                " cells along the longest axis (" + std::to_string(length) + ")");
+    // %g: std::to_string's fixed six decimals print a small cell size as 0.000000.
+    char text[160];
+    std::snprintf(
+        text, sizeof text,
+        "cell size %g gives more than %u cells along the longest axis (%g long); the smallest is %g", size,
+        static_cast<unsigned>(kMaxCellsPerAxis), length, length / static_cast<double>(kMaxCellsPerAxis));
+    throw Error(text);
   }
   return make(bounds, size, kMaxCellsPerAxis);
 }

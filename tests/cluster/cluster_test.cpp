@@ -807,6 +807,15 @@ TEST(Cluster, RejectsBadInputAndImpossibleOptions) {
   ClusterOptions tiny;
   tiny.cell_size = 1e-9;
   EXPECT_THROW(run(test::grid_square(4), tiny), Error);
+  // The message gives the size asked for and the smallest allowed, not six fixed decimals ("0.000000").
+  std::string message;
+  try {
+    run(test::grid_square(4), tiny);
+  } catch (const Error& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("cell size 1e-09 "), std::string::npos) << message;
+  EXPECT_NE(message.find("the smallest is 4.76837e-07"), std::string::npos) << message;
   ClusterOptions zero;
   zero.grid = 0;
   EXPECT_THROW(run(test::grid_square(4), zero), Error);
