@@ -79,6 +79,32 @@ TEST(Cli, UnknownFlagIsAnError) {
   EXPECT_NE(r.err.find("no-such-flag"), std::string::npos);
 }
 
+// A negative count used to pass as 2^64 - 3 (a silent no-op decimation), and bounds printed as "0.000000"
+// or hundreds of digits.
+TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
+  test::TempDir dir;
+  const struct {
+    const char* args;
+    const char* message;
+  } cases[] = {
+      {"decimate in.ply -o out.ply --faces -3", "--faces: '-3' is not a whole number >= 1"},
+      {"decimate in.ply -o out.ply --vertices 1.5", "--vertices: '1.5' is not a whole number >= 1"},
+      {"simplify in.ply -o out.ply --faces -1", "--faces: '-1' is not a whole number >= 1"},
+      {"decimate in.ply -o out.ply --ratio 0", "--ratio: '0' is not a number in (0, 1]"},
+      {"decimate in.ply -o out.ply --max-error -1e-9", "--max-error: '-1e-9' is not a number >= 0 (or inf)"},
+      {"decimate in.ply -o out.ply --boundary-weight nan", "'nan' is not a finite number >= 0"},
+      {"cluster in.ply -o out.ply --cell-size 0", "--cell-size: '0' is not a finite number > 0"},
+      {"cluster in.ply -o out.ply --grid 10 --threads -1",
+       "--threads: '-1' is not a whole number from 0 to 4096"},
+  };
+  for (const auto& c : cases) {
+    const CommandResult r = run(c.args, dir);
+    EXPECT_EQ(r.exit_code, 2) << c.args;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << c.args << "\n" << r.err;
+    EXPECT_EQ(r.err.find("0.000000"), std::string::npos) << r.err;
+  }
+}
+
 TEST(Cli, GenIsDeterministicAndInfoCountsIt) {
   test::TempDir dir;
   ASSERT_EQ(run("gen -q -o " + (dir / "a.ply") + " --triangles 20000 --seed 3", dir).exit_code, 0);

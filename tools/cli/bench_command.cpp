@@ -35,11 +35,11 @@ void add_bench_command(CLI::App& app) {
   cmd->add_option("input", flags->input, "The mesh (PLY, OBJ, STL or Draco)")->required();
   auto* faces = cmd->add_option("--faces", flags->faces, "Face targets, comma-separated (e.g. 10000,2000)")
                     ->delimiter(',')
-                    ->check(CLI::Range(std::uint64_t{1}, std::numeric_limits<std::uint64_t>::max()));
+                    ->check(whole_number(1));
   auto* ratios = cmd->add_option("--ratios", flags->ratios,
                                  "Face targets as fractions of the input's faces (e.g. 0.1,0.02)")
                      ->delimiter(',')
-                     ->check(CLI::Range(std::numeric_limits<double>::min(), 1.0));
+                     ->check(fraction());
   faces->excludes(ratios);
   cmd->add_option("--methods", flags->methods,
                   "Methods, comma-separated (default: all of " + method_names + ")")
@@ -47,19 +47,19 @@ void add_bench_command(CLI::App& app) {
   cmd->add_option("--repeat", flags->options.repeat,
                   "Runs per method and target; the median time is reported")
       ->capture_default_str()
-      ->check(CLI::Range(1, 1000));
+      ->check(whole_number(1, 1000));
   cmd->add_option("--samples", flags->options.compare.samples, "Area samples each way for the distances")
       ->capture_default_str()
-      ->check(CLI::Range(std::size_t{1}, std::size_t{1'000'000'000}));
+      ->check(whole_number(1, 1'000'000'000));
   cmd->add_option("--seed", flags->options.compare.seed, "Sampling seed")->capture_default_str();
   cmd->add_option("--threads", flags->options.threads,
                   "Threads for ocsimp's methods (0 = all cores; meshoptimizer runs on one)")
       ->capture_default_str()
-      ->check(CLI::Range(0, 4096));
+      ->check(whole_number(0, 4096));
   cmd->add_option("--distance-threads", flags->distance_threads,
                   "Threads for the distance measurement (0 = all cores; the numbers do not depend on it)")
       ->capture_default_str()
-      ->check(CLI::Range(0, 4096));
+      ->check(whole_number(0, 4096));
   cmd->add_option("--name", flags->name,
                   "The mesh's label in the table (default: the file name without extension)");
   cmd->add_option("--json", flags->json, "Also write every number as JSON to this file");

@@ -1,7 +1,9 @@
 // What the commands share: the progress bar, timing, the summary table and JSON reports.
 #include <unistd.h>
 
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -82,7 +84,63 @@ struct ProgressBar {
   }
 };
 
+// The flag's value as a double, if it is one (as CLI11 will convert it).
+bool parse_number(const std::string& text, double& value) {
+  return CLI::detail::lexical_cast(text, value) && !std::isnan(value);
+}
+
 }  // namespace
+
+CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
+  const std::string wanted =
+      high == std::numeric_limits<std::uint64_t>::max()
+          ? "a whole number >= " + std::to_string(low)
+          : "a whole number from " + std::to_string(low) + " to " + std::to_string(high);
+  return CLI::Validator(
+      [low, high, wanted](std::string& text) -> std::string {
+        std::uint64_t value = 0;
+        const char* end = text.data() + text.size();
+        const auto [stop, error] = std::from_chars(text.data(), end, value);
+        if (text.empty() || error != std::errc() || stop != end || value < low || value > high)
+          return "'" + text + "' is not " + wanted;
+        return {};
+      },
+      wanted);
+}
+
+CLI::Validator non_negative_number(bool or_infinity) {
+  const std::string wanted = or_infinity ? "a number >= 0 (or inf)" : "a finite number >= 0";
+  return CLI::Validator(
+      [or_infinity, wanted](std::string& text) -> std::string {
+        double value = 0;
+        if (!parse_number(text, value) || value < 0 || (!or_infinity && std::isinf(value)))
+          return "'" + text + "' is not " + wanted;
+        return {};
+      },
+      wanted);
+}
+
+CLI::Validator positive_number() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        double value = 0;
+        if (!parse_number(text, value) || !(value > 0) || std::isinf(value))
+          return "'" + text + "' is not a finite number > 0";
+        return {};
+      },
+      "a finite number > 0");
+}
+
+CLI::Validator fraction() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        double value = 0;
+        if (!parse_number(text, value) || !(value > 0) || value > 1)
+          return "'" + text + "' is not a number in (0, 1]";
+        return {};
+      },
+      "a number in (0, 1]");
+}
 
 ProgressFn make_progress(bool quiet) {
   if (quiet || !::isatty(STDERR_FILENO)) return {};

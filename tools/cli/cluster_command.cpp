@@ -29,17 +29,17 @@ void add_cluster_command(CLI::App& app) {
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
   auto* grid = cmd->add_option("--grid", flags->options.grid, "Uniform grid: cells along the longest axis")
                    ->capture_default_str()
-                   ->check(CLI::Range(1u, 1u << 21));
+                   ->check(whole_number(1, 1u << 21));
   auto* cell = cmd->add_option("--cell-size", flags->options.cell_size, "Uniform grid: edge length of a cell")
-                   ->check(CLI::PositiveNumber);
+                   ->check(positive_number());
   auto* faces = cmd->add_option("--faces", flags->faces,
                                 "Face budget: the largest face count not above it (octree: by merging; "
                                 "uniform grid: by choosing the resolution)")
-                    ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+                    ->check(whole_number(1, std::uint64_t{1} << 40));
   auto* octree =
       cmd->add_flag("--octree", flags->options.octree, "Adaptive octree: needs --vertices or --faces");
   auto* vertices = cmd->add_option("--vertices", flags->vertices, "Octree: exactly this many vertices")
-                       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 40));
+                       ->check(whole_number(1, std::uint64_t{1} << 40));
   grid->excludes(cell);
   faces->excludes(grid)->excludes(cell);
   vertices->excludes(faces)->excludes(grid)->excludes(cell)->needs(octree);
@@ -53,11 +53,11 @@ void add_cluster_command(CLI::App& app) {
   cmd->add_option("--boundary-weight", flags->options.boundary_weight,
                   "Weight of a border crossing against a cell's worth of surface")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(CLI::Range(0u, 4096u));
+      ->check(whole_number(0, 4096));
   cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");

@@ -4,6 +4,8 @@
 #include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cstdint>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -24,6 +26,19 @@ void add_decimate_command(CLI::App& app);
 void add_simplify_command(CLI::App& app);
 void add_lod_command(CLI::App& app);
 void add_bench_command(CLI::App& app);
+
+// Checks for numeric flags, with messages that say what the flag takes. (CLI11's Range prints a double's
+// bounds with std::to_string, as "0.000000" or a few hundred digits, and an unsigned flag parses "-3" as
+// 2^64 - 3, which passed an upper bound of 2^64 - 1.)
+// Digits only, from `low` to `high`.
+CLI::Validator whole_number(std::uint64_t low,
+                            std::uint64_t high = std::numeric_limits<std::uint64_t>::max());
+// A finite number >= 0; `or_infinity` also takes "inf" (no bound).
+CLI::Validator non_negative_number(bool or_infinity = false);
+// A finite number > 0.
+CLI::Validator positive_number();
+// A number in (0, 1].
+CLI::Validator fraction();
 
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.

@@ -49,7 +49,7 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("simplified", flags->simplified, "The simplified mesh")->required();
   cmd->add_option("--samples", flags->options.samples, "Area-uniform samples in each direction")
       ->capture_default_str()
-      ->check(CLI::Range(std::size_t{0}, std::size_t{1'000'000'000}));
+      ->check(whole_number(0, 1'000'000'000));
   cmd->add_option("--seed", flags->options.seed, "Sampling seed (same seed, same numbers)")
       ->capture_default_str();
   cmd->add_flag("--no-vertices", flags->no_vertices,
@@ -58,7 +58,7 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("--report", flags->report, "Also write the JSON, with timing, to this file");
   cmd->add_option("--threads", flags->threads, "Threads (0 = all cores); the numbers do not depend on it")
       ->capture_default_str()
-      ->check(CLI::Range(0, 4096));
+      ->check(whole_number(0, 4096));
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();

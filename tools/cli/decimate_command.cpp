@@ -31,21 +31,20 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
   cmd->add_option("--faces", o.target_faces,
                   "Stop at exactly N faces (N-1 where a closed manifold's parity forbids N)")
-      ->check(CLI::Range(std::uint64_t{1}, std::numeric_limits<std::uint64_t>::max()));
-  cmd->add_option("--vertices", o.target_vertices, "Stop at exactly N vertices")
-      ->check(CLI::Range(std::uint64_t{1}, std::numeric_limits<std::uint64_t>::max()));
+      ->check(whole_number(1));
+  cmd->add_option("--vertices", o.target_vertices, "Stop at exactly N vertices")->check(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Stop at round(R * input faces) faces, R in (0, 1]")
-      ->check(CLI::Range(std::numeric_limits<double>::min(), 1.0));
+      ->check(fraction());
   cmd->add_option("--max-error", o.max_error,
                   "Apply no collapse whose cost, as a distance in model units, exceeds E")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number(true));
   cmd->add_option("--pair-distance", o.pair_distance,
                   "Also join vertex pairs closer than T (model units) that share no edge")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd->add_option("--boundary-weight", o.boundary_weight,
                   "Weight of the planes that hold open borders in place (0: borders move freely)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd->add_flag("--lock-boundary", o.lock_boundary, "Border vertices never move or merge with each other");
   cmd->add_flag("--preserve-topology", o.preserve_topology,
                 "Enforce the link condition: manifold stays manifold, no hole closes, no part vanishes");
@@ -53,15 +52,15 @@ void add_decimate_command(CLI::App& app) {
                 "Weigh every face plane the same instead of by its area");
   cmd->add_option("--shape-weight", o.shape_weight, "Penalty on collapses that leave slivers (0: off)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd->add_option("--attribute-weight", o.attribute_weight,
                   "Penalty on collapses across normal, color or uv differences (0: geometry only)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd->add_flag("--weld", o.weld, "Merge vertices at exactly equal positions first");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(CLI::Range(0, 4096));
+      ->check(whole_number(0, 4096));
   cmd->add_option("--report", flags->report, "Write counts, statistics, times and peak memory as JSON");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");

@@ -23,7 +23,7 @@ void add_gen_command(CLI::App& app) {
   cmd->add_option("--triangles", flags->options.triangles,
                   "Triangles wanted; the lattice reaches the nearest 12 n^2 per component")
       ->capture_default_str()
-      ->check(CLI::Range(std::uint64_t{12}, std::uint64_t{20'000'000'000}));
+      ->check(whole_number(12, 20'000'000'000));
   cmd->add_option("--seed", flags->options.seed, "Random seed (same seed, same bytes)")
       ->capture_default_str();
   cmd->add_option("--components", flags->options.components, "Separate blobs")->capture_default_str();

@@ -49,11 +49,10 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
   cmd->add_option("--faces", o.target_faces,
                   "Exact face count (N-1 where a closed manifold's parity forbids N)")
-      ->check(CLI::Range(std::uint64_t{1}, std::numeric_limits<std::uint64_t>::max()));
-  cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
-      ->check(CLI::Range(std::numeric_limits<double>::min(), 1.0));
+      ->check(whole_number(1));
+  cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")->check(fraction());
   cmd->add_option("--max-error", o.max_error, "Largest collapse cost allowed, as a distance in model units")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number(true));
   cmd->add_option(
       "--memory-limit", flags->memory_limit,
       "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
