@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -709,7 +710,14 @@ std::int64_t PlyStream::read_integer(PlyType type, const char* what) {
   const double value = read_number(type);
   const auto integer = exact_integer(value);
   if (!integer) {
-    const std::string reason = std::string(what) + " " + std::to_string(value) + " is not an integer";
+    // The shortest form that reads back as the file's value: std::to_string's six fixed decimals print 1e-9
+    // as 0.000000.
+    char text[32];
+    const char* end = type == PlyType::float32
+                          ? std::to_chars(text, text + sizeof text, static_cast<float>(value)).ptr
+                          : std::to_chars(text, text + sizeof text, value).ptr;
+    const std::string number(static_cast<const char*>(text), end);
+    const std::string reason = std::string(what) + " " + number + " is not an integer";
     if (ascii_) fail(reason);
     fail_at_byte(offset, reason);
   }

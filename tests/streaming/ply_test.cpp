@@ -957,7 +957,7 @@ const Malformed kMalformed[] = {
     {"ascii_face_two_corners.ply", "a face with 2 corners"},
     {"ascii_face_zero_corners.ply", "a face with 0 corners"},
     {"ascii_count_out_of_range.ply", "'300' is out of range for uchar"},
-    {"ascii_fractional_index.ply", "is not an integer"},
+    {"ascii_fractional_index.ply", "vertex index 2.5 is not an integer"},
     {"ascii_absurd_vertex_count.ply", "more than 2^32-1 vertices"},
     {"ascii_too_many_vertices.ply", "more than 2^32-1 vertices"},
     {"binary_absurd_vertex_count.ply", "more than 2^32-1 vertices"},
