@@ -51,7 +51,9 @@ void add_bench_command(CLI::App& app) {
   cmd->add_option("--samples", flags->options.compare.samples, "Area samples each way for the distances")
       ->capture_default_str()
       ->check(whole_number(1, 1'000'000'000));
-  cmd->add_option("--seed", flags->options.compare.seed, "Sampling seed")->capture_default_str();
+  cmd->add_option("--seed", flags->options.compare.seed, "Sampling seed")
+      ->capture_default_str()
+      ->check(whole_number(0));
   cmd->add_option("--threads", flags->options.threads,
                   "Threads for ocsimp's methods (0 = all cores; meshoptimizer runs on one)")
       ->capture_default_str()

@@ -51,7 +51,8 @@ void add_compare_command(CLI::App& app) {
       ->capture_default_str()
       ->check(whole_number(0, 1'000'000'000));
   cmd->add_option("--seed", flags->options.seed, "Sampling seed (same seed, same numbers)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(whole_number(0));
   cmd->add_flag("--no-vertices", flags->no_vertices,
                 "Do not also measure every vertex (vertices only raise the Hausdorff distance)");
   cmd->add_flag("--json", flags->json, "Print one JSON object instead of a table");

@@ -25,7 +25,8 @@ void add_gen_command(CLI::App& app) {
       ->capture_default_str()
       ->check(whole_number(12, 20'000'000'000));
   cmd->add_option("--seed", flags->options.seed, "Random seed (same seed, same bytes)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(whole_number(0));
   cmd->add_option("--components", flags->options.components, "Separate blobs")->capture_default_str();
   cmd->add_option("--holes", flags->options.holes, "Holes cut into each blob (0..6), leaving open borders")
       ->capture_default_str();
@@ -36,7 +37,8 @@ void add_gen_command(CLI::App& app) {
   cmd->add_flag("--ascii", flags->options.ascii, "ASCII PLY instead of binary");
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); output does not depend on it")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(whole_number(0, 4096));
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
