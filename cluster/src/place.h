@@ -69,7 +69,7 @@ struct Placement {
 Placement place(const PlacementSums& sums, Representative representative);
 
 // The minimizer of q nearest `origin` along the directions q leaves free: a pseudo-inverse solve with a
-// smooth cutoff at 1e-3 of the largest eigenvalue (see place.cpp).
+// smooth cutoff at 1e-3 of q's trace (see place.cpp).
 Vec3d minimize_damped(const Quadric& q, const Vec3d& origin);
 
 // The minimizer of q over `box`: the best of the unconstrained solve and the solves restricted to each face,

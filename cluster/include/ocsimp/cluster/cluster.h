@@ -44,10 +44,11 @@ namespace ocsimp {
 
 // Where a cell puts its vertex.
 enum class Representative {
-  // The minimizer of the cell's quadric, solved around the mean of the cell's vertices with a truncated
-  // eigen-decomposition (Lindstrom 2000): directions the quadric does not constrain (along a flat cell, along
-  // a cylinder's axis) stay at the mean instead of running off. The cutoff, at 1e-3 of the largest
-  // eigenvalue, is smooth (Tikhonov damping) so that the point varies continuously with the sums. The quadric
+  // The minimizer of the cell's quadric, solved around the mean of the cell's vertices as a truncated
+  // pseudo-inverse (Lindstrom 2000): directions the quadric does not constrain (along a flat cell, along a
+  // cylinder's axis) stay at the mean instead of running off. The cutoff, at 1e-3 of the quadric's trace (the
+  // sum of its eigenvalues), is smooth (Tikhonov damping) so that the point varies continuously with the
+  // sums. The quadric
   // only knows the triangles touching the cell, so a solution outside the cell by more than their mean edge
   // (at most the cell's size) is replaced by the quadric's best point within that grown box.
   quadric,
