@@ -57,11 +57,11 @@ void add_bench_command(CLI::App& app) {
   cmd->add_option("--threads", flags->options.threads,
                   "Threads for ocsimp's methods (0 = all cores; meshoptimizer runs on one)")
       ->capture_default_str()
-      ->check(whole_number(0, 4096));
+      ->check(thread_count());
   cmd->add_option("--distance-threads", flags->distance_threads,
                   "Threads for the distance measurement (0 = all cores; the numbers do not depend on it)")
       ->capture_default_str()
-      ->check(whole_number(0, 4096));
+      ->check(thread_count());
   cmd->add_option("--name", flags->name,
                   "The mesh's label in the table (default: the file name without extension)");
   cmd->add_option("--json", flags->json, "Also write every number as JSON to this file");

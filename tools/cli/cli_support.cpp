@@ -84,9 +84,17 @@ struct ProgressBar {
   }
 };
 
-// The flag's value as a double, if it is one (as CLI11 will convert it).
-bool parse_number(const std::string& text, double& value) {
-  return CLI::detail::lexical_cast(text, value) && !std::isnan(value);
+// A check of a floating-point flag: its value (as CLI11 will convert it; never NaN) passes `accepts`, or the
+// message says the flag takes `wanted`.
+template <class Accepts>
+CLI::Validator number_check(const std::string& wanted, Accepts accepts) {
+  return CLI::Validator(
+      [wanted, accepts](std::string& text) -> std::string {
+        double value = 0;
+        if (CLI::detail::lexical_cast(text, value) && !std::isnan(value) && accepts(value)) return {};
+        return "'" + text + "' is not " + wanted;
+      },
+      wanted);
 }
 
 }  // namespace
@@ -109,37 +117,20 @@ CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
 }
 
 CLI::Validator non_negative_number(bool or_infinity) {
-  const std::string wanted = or_infinity ? "a number >= 0 (or inf)" : "a finite number >= 0";
-  return CLI::Validator(
-      [or_infinity, wanted](std::string& text) -> std::string {
-        double value = 0;
-        if (!parse_number(text, value) || value < 0 || (!or_infinity && std::isinf(value)))
-          return "'" + text + "' is not " + wanted;
-        return {};
-      },
-      wanted);
+  return number_check(or_infinity ? "a number >= 0 (or inf)" : "a finite number >= 0",
+                      [or_infinity](double v) { return v >= 0 && (or_infinity || !std::isinf(v)); });
 }
 
 CLI::Validator positive_number() {
-  return CLI::Validator(
-      [](std::string& text) -> std::string {
-        double value = 0;
-        if (!parse_number(text, value) || !(value > 0) || std::isinf(value))
-          return "'" + text + "' is not a finite number > 0";
-        return {};
-      },
-      "a finite number > 0");
+  return number_check("a finite number > 0", [](double v) { return v > 0 && !std::isinf(v); });
 }
 
 CLI::Validator fraction() {
-  return CLI::Validator(
-      [](std::string& text) -> std::string {
-        double value = 0;
-        if (!parse_number(text, value) || !(value > 0) || value > 1)
-          return "'" + text + "' is not a number in (0, 1]";
-        return {};
-      },
-      "a number in (0, 1]");
+  return number_check("a number in (0, 1]", [](double v) { return v > 0 && v <= 1; });
+}
+
+CLI::Validator thread_count() {
+  return whole_number(0, 4096);
 }
 
 ProgressFn make_progress(bool quiet) {

@@ -57,7 +57,7 @@ void add_cluster_command(CLI::App& app) {
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(whole_number(0, 4096));
+      ->check(thread_count());
   cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");

@@ -39,6 +39,8 @@ CLI::Validator non_negative_number(bool or_infinity = false);
 CLI::Validator positive_number();
 // A number in (0, 1].
 CLI::Validator fraction();
+// A --threads value: 0 (all cores) to 4096.
+CLI::Validator thread_count();
 
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.

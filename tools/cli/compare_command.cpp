@@ -59,7 +59,7 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("--report", flags->report, "Also write the JSON, with timing, to this file");
   cmd->add_option("--threads", flags->threads, "Threads (0 = all cores); the numbers do not depend on it")
       ->capture_default_str()
-      ->check(whole_number(0, 4096));
+      ->check(thread_count());
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();

@@ -38,7 +38,7 @@ void add_gen_command(CLI::App& app) {
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); output does not depend on it")
       ->capture_default_str()
-      ->check(whole_number(0, 4096));
+      ->check(thread_count());
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();

@@ -65,7 +65,7 @@ void add_simplify_command(CLI::App& app) {
       "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8)");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(whole_number(0, 4096));
+      ->check(thread_count());
   cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
   cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors (no progress bars, no summary)");
