@@ -1139,7 +1139,8 @@ void PlyStream::read_face_values() {
     const std::uint64_t offset = byte_position();
     list_left_ = read_list_count(property);
     if (!strips_ && list_left_ < 3) {
-      const std::string reason = "a face with " + std::to_string(list_left_) + " corners in " + where();
+      const std::string reason = "a face with " + std::to_string(list_left_) +
+                                 (list_left_ == 1 ? " corner in " : " corners in ") + where();
       if (ascii_) fail(reason);
       fail_at_byte(offset, reason);
     }

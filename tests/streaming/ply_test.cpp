@@ -968,7 +968,7 @@ const Malformed kMalformed[] = {
     {"binary_truncated_faces.ply", "the file ends in record 1 of element face"},
     {"binary_index_out_of_range.ply", "vertex index 7 is out of range (4 vertices)"},
     {"binary_negative_index.ply", "vertex index -1 is out of range"},
-    {"binary_face_one_corner.ply", "a face with 1 corners"},
+    {"binary_face_one_corner.ply", "a face with 1 corner in"},
     {"binary_nan_coordinate.ply", "vertex 1 has a coordinate that is not a finite float"},
     {"binary_double_overflow.ply", "vertex 1 has a coordinate that is not a finite float"},
     {"binary_trailing_bytes.ply", "4 bytes of unexpected data after the last element"},
