@@ -63,7 +63,7 @@ constexpr double kCrossingFade = 100.0;
 // The unit eigenvector of the largest eigenvalue of a positive semi-definite a (zero if a is zero), by power
 // iteration from a's column of largest diagonal: for the near rank-one quadric of a flat cell that column is
 // already along the normal, and each step shrinks the rest by the ratio of the two largest eigenvalues. A
-// tenth of a full eigen-decomposition, which every cell's placement needs on top of this.
+// tenth of what a full eigen-decomposition costs.
 Vec3d dominant_direction(const Eigen::Matrix3d& a) {
   int j = 0;
   if (a(1, 1) > a(j, j)) j = 1;
