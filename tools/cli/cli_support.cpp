@@ -109,7 +109,8 @@ CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
         std::uint64_t value = 0;
         const char* end = text.data() + text.size();
         const auto [stop, error] = std::from_chars(text.data(), end, value);
-        if (text.empty() || error != std::errc() || stop != end || value < low || value > high)
+        // (from_chars refuses an empty string, a sign and anything but digits.)
+        if (error != std::errc() || stop != end || value < low || value > high)
           return "'" + text + "' is not " + wanted;
         return {};
       },
