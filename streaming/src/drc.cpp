@@ -230,6 +230,31 @@ void add_float_attribute(draco::Mesh& mesh, draco::GeometryAttribute::Type type,
   }
 }
 
+// Draco quantizes positions and uvs over each axis's range, and that range is a float difference inside the
+// encoder: values spanning more than the largest float (say -2e38 to 2e38) overflow it, and the encoder then
+// crashed. (Normals are normalized first, so any finite ones encode.)
+template <class Vec>
+void check_quantizable(const std::string& path, const char* what, const std::vector<Vec>& values) {
+  auto text = [](float value) {
+    char buffer[16];
+    return std::string(buffer, print_float(buffer, value));
+  };
+  for (int axis = 0; axis < Vec::RowsAtCompileTime && !values.empty(); ++axis) {
+    float lo = values[0][axis], hi = lo;
+    for (const Vec& v : values) {
+      lo = std::min(lo, v[axis]);
+      hi = std::max(hi, v[axis]);
+    }
+    if (!std::isfinite(hi - lo)) {
+      throw Error(
+          path, {},
+          std::string("cannot write Draco: the ") + what + " span " + text(lo) + " to " + text(hi) +
+              " along axis " + "xyz"[axis] +
+              ", more than a float can hold, and Draco quantizes over that span (PLY or OBJ can hold them)");
+    }
+  }
+}
+
 }  // namespace
 
 std::unique_ptr<TriangleStream> open_drc_stream(const std::string& path, const ReadOptions& options) {
@@ -246,6 +271,9 @@ void write_drc(const std::string& path, const IndexedMesh& mesh, const WriteOpti
         path, {},
         "Draco compression level must be 0..10, not " + std::to_string(options.draco_compression_level));
   if (mesh.triangles.empty()) throw Error(path, {}, "cannot write a Draco mesh without faces");
+
+  check_quantizable(path, "positions", mesh.positions);
+  if (mesh.has_uvs()) check_quantizable(path, "texture coordinates", mesh.uvs);
 
   draco::Mesh out;
   const std::size_t n = mesh.positions.size();

@@ -124,6 +124,41 @@ TEST(Drc, RejectsBadOptionsWithoutWriting) {
   EXPECT_TRUE(std::filesystem::is_empty(dir.path));
 }
 
+TEST(Drc, RefusesValuesSpanningMoreThanAFloat) {
+  // Draco quantizes over each axis's span, a float difference inside the encoder: -2e38 to 2e38 overflows it
+  // (the encoder crashed). Such a mesh is refused with a message; huge normals are normalized and encode.
+  TempDir dir;
+  IndexedMesh wide = test::cube(1);
+  wide.positions[0].x() = -2e38f;
+  wide.positions[1].x() = 2e38f;
+  try {
+    write_mesh(dir / "wide.drc", wide);
+    ADD_FAILURE() << "a mesh wider than a float was written";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("along axis x"), std::string::npos) << e.what();
+  }
+  IndexedMesh uvs = test::attributed_sphere(2);
+  uvs.uvs[0].x() = -3e38f;
+  uvs.uvs[1].x() = 3e38f;
+  EXPECT_THROW(write_mesh(dir / "uvs.drc", uvs), Error);
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path));
+
+  IndexedMesh normals = test::attributed_sphere(2);
+  normals.normals[0] = Vec3f(3e38f, 3e38f, 0);
+  write_mesh(dir / "normals.drc", normals);
+  const IndexedMesh back = read_mesh(dir / "normals.drc");
+  ASSERT_EQ(back.vertex_count(), normals.vertex_count());
+  // Draco may reorder the points: the huge normal is the one at the first vertex's position.
+  std::size_t at = 0;
+  for (std::size_t i = 0; i < back.vertex_count(); ++i) {
+    if ((back.positions[i] - normals.positions[0]).norm() <
+        (back.positions[at] - normals.positions[0]).norm())
+      at = i;
+  }
+  EXPECT_NEAR(back.normals[at].x(), std::sqrt(0.5f), 1e-3);
+  EXPECT_NEAR(back.normals[at].y(), std::sqrt(0.5f), 1e-3);
+}
+
 TEST(Drc, TruncatedFileIsAnError) {
   TempDir dir;
   write_mesh(dir / "s.drc", test::sphere(3));
