@@ -192,6 +192,37 @@ TEST(Cli, FailedConvertLeavesNothingBehind) {
   EXPECT_FALSE(std::filesystem::exists(dir / "out.xyz"));
 }
 
+TEST(Cli, AnUnwritableDestinationFailsBeforeAnyOutput) {
+  // A report in a missing folder, or a destination that is a folder, used to fail only at the end, after the
+  // mesh had been written: the run failed and left its output.
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply";
+  write_mesh(mesh, test::grid_square(8));
+  std::filesystem::create_directory(dir / "folder");
+  const std::vector<std::string> commands = {
+      "cluster " + mesh + " -o " + (dir / "out.ply") + " --grid 4 --report " + (dir / "missing/r.json"),
+      "decimate " + mesh + " -o " + (dir / "out.ply") + " --ratio 0.5 --report " + (dir / "folder"),
+      "simplify " + mesh + " -o " + (dir / "out.ply") + " --ratio 0.5 --report " + (dir / "missing/r.json"),
+      "lod " + mesh + " -o " + (dir / "out_{faces}.ply") + " --faces 20,10 --report " + (dir / "folder"),
+      "convert " + mesh + " " + (dir / "missing/out.ply"),
+      "compare " + mesh + " " + mesh + " --report " + (dir / "folder"),
+      "gen -o " + (dir / "missing/g.ply") + " --triangles 100",
+  };
+  for (const std::string& command : commands) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << command;
+    EXPECT_EQ(lines(r.err), 1u) << command << "\n" << r.err;
+    EXPECT_TRUE(r.err.find("missing") != std::string::npos || r.err.find("is a folder") != std::string::npos)
+        << r.err;
+    for (const auto& entry : std::filesystem::directory_iterator(dir.path)) {
+      const std::string name = entry.path().filename().string();
+      EXPECT_TRUE(name == "in.ply" || name == "folder" || name == "stdout.txt" || name == "stderr.txt")
+          << command << ": left " << name;
+    }
+    EXPECT_TRUE(std::filesystem::is_empty(dir / "folder")) << command;
+  }
+}
+
 TEST(Cli, InterruptedGenLeavesNoFile) {
   test::TempDir dir;
   const std::string out = dir / "big.ply";

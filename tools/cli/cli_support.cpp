@@ -5,10 +5,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 
 #include "commands.h"
+#include "ocsimp/core/error.h"
 #include "ocsimp/streaming/atomic_file.h"
 
 namespace ocsimp::cli {
@@ -185,6 +187,12 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
         "it back\n",
         path.c_str(), mesh.positions.size());
   }
+}
+
+void check_destination(const std::string& path) {
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) throw Error(path, {}, "is a folder, not a file name");
+  AtomicFile probe(path);  // creates, then (uncommitted) deletes, a temporary beside the destination
 }
 
 void write_json_report(const std::string& path, const nlohmann::json& report) {

@@ -64,6 +64,8 @@ void add_cluster_command(CLI::App& app) {
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
+    check_destination(flags->output);
+    if (!flags->report.empty()) check_destination(flags->report);
     ClusterOptions options = flags->options;
     options.preserve_boundary = !flags->no_boundary;
     options.representative = flags->representative == "mean"          ? Representative::mean

@@ -52,6 +52,11 @@ ProgressFn make_progress(bool quiet);
 // refuses a mesh without faces with an error), but ocsimp's readers refuse such a file as input.
 void write_result(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options);
 
+// Refuses, before any work, a destination the command could not write at the end: a folder, or a path in a
+// folder that does not exist or cannot take a new file (hours of clustering would otherwise be lost, or the
+// mesh written and the command then fail on its report).
+void check_destination(const std::string& path);
+
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
 

@@ -25,6 +25,7 @@ void add_convert_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
+    check_destination(flags->output);
     ReadOptions read;
     read.progress = make_progress(flags->quiet);
     flags->write.progress = read.progress;

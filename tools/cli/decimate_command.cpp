@@ -67,6 +67,8 @@ void add_decimate_command(CLI::App& app) {
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
+    check_destination(flags->output);
+    if (!flags->report.empty()) check_destination(flags->report);
     DecimateOptions options = flags->options;
     const auto limit = limit_threads(options.threads);
     options.area_weighting = !flags->no_area_weighting;

@@ -76,6 +76,8 @@ void add_simplify_command(CLI::App& app) {
       throw Error("simplify: give --faces, --ratio or --max-error");
     }
     format_from_extension(flags->output);  // refuse an unknown output format before reading anything
+    check_destination(flags->output);
+    if (!flags->report.empty()) check_destination(flags->report);
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;
