@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <random>
@@ -169,6 +170,40 @@ TEST(Cluster, SphereRepresentativesLieOnTheSphere) {
   EXPECT_EQ(topology.boundary_edges, 0u);
   EXPECT_EQ(topology.degenerate_faces, 0u);
   EXPECT_LT(topology.inconsistent_edges, topology.edges / 20);
+}
+
+TEST(Cluster, ASphereSpanningNearlyTheFloatRangeStaysFinite) {
+  // A quadric's minimizer may lie a little beyond the surface's extreme (where tangent planes meet); on a
+  // sphere of radius 0.999 * FLT_MAX that was past the largest float, and the output had infinite vertices.
+  // A latitude-longitude sphere, each pole a ring of coincident points (as many exporters write it).
+  const float radius = 0.999f * std::numeric_limits<float>::max();
+  constexpr int kRings = 30, kSegments = 60;
+  IndexedMesh sphere;
+  for (int i = 0; i <= kRings; ++i) {
+    const double theta = M_PI * i / kRings;
+    for (int j = 0; j < kSegments; ++j) {
+      const double phi = 2 * M_PI * j / kSegments;
+      sphere.positions.push_back(
+          (radius * Vec3d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)))
+              .cast<float>());
+    }
+  }
+  for (int i = 0; i < kRings; ++i) {
+    for (int j = 0; j < kSegments; ++j) {
+      const Index a = i * kSegments + j, b = i * kSegments + (j + 1) % kSegments;
+      sphere.triangles.push_back({a, a + kSegments, b + kSegments});
+      sphere.triangles.push_back({a, b + kSegments, b});
+    }
+  }
+  for (Representative r : {Representative::quadric, Representative::constrained, Representative::mean}) {
+    const QuadricMesh out = run(sphere, grid_options(4, r));
+    ASSERT_GT(out.mesh.vertex_count(), 20u) << representative_name(r);
+    for (const Vec3f& p : out.mesh.positions) {
+      ASSERT_TRUE(p.allFinite()) << representative_name(r);
+      EXPECT_LT(p.cast<double>().norm() / radius, 1.3) << representative_name(r);
+      EXPECT_GT(p.cast<double>().norm() / radius, 0.5) << representative_name(r);
+    }
+  }
 }
 
 TEST(Cluster, CubeStaysSharpWithQuadricPlacementAndRoundsWithMean) {
