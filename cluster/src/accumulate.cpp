@@ -84,7 +84,11 @@ std::uint64_t quantize(const Vec3d& local) {
   }
   return q;
 }
-// Axis a's offset in quanta. quantize() leaves bit 63 clear, so the last axis needs no mask.
+// Bit 63 of a packed vertex's quanta, which quantize() leaves clear: the face pass sets it on every vertex a
+// triangle refers to, so that the per-vertex sums after it skip the rest. A scan's unreferenced points are
+// often outliers (bunny.ply has 1,113), and averaged in they moved cell means by up to half a cell.
+constexpr std::uint64_t kReferenced = std::uint64_t{1} << 63;
+// Axis a's offset in quanta, of quanta without kReferenced (the last axis is not masked).
 std::int64_t quantum(std::uint64_t q, int a) {
   return static_cast<std::int64_t>(a == 2 ? q >> 42 : (q >> (21 * a)) & kQuantumMax);
 }
@@ -104,6 +108,24 @@ void unpack(const Vec3f& slot, std::uint32_t& cell, std::uint64_t& q) {
   const char* bytes = reinterpret_cast<const char*>(slot.data());
   std::memcpy(&cell, bytes, 4);
   std::memcpy(&q, bytes + 4, 8);
+}
+
+// unpack() for the face pass, which also sets kReferenced in the slot and returns the quanta without it.
+// Threads may mark the same vertex at once: the slot's last word goes through relaxed atomics (the other two
+// are only read here), and every writer stores the same value, so no mark is lost. It is stored only when
+// missing, as a vertex is a corner of about six triangles and each store dirties a cache line.
+void unpack_marking(Vec3f& slot, std::uint32_t& cell, std::uint64_t& q) {
+  using Word = std::uint32_t __attribute__((may_alias));
+  char* bytes = reinterpret_cast<char*>(slot.data());
+  std::uint32_t low;
+  std::memcpy(&cell, bytes, 4);
+  std::memcpy(&low, bytes + 4, 4);
+  Word* high_word = reinterpret_cast<Word*>(bytes + 8);
+  constexpr std::uint32_t kMark = static_cast<std::uint32_t>(kReferenced >> 32);
+  const std::uint32_t high = __atomic_load_n(high_word, __ATOMIC_RELAXED);
+  if (!(high & kMark)) [[unlikely]]
+    __atomic_store_n(high_word, high | kMark, __ATOMIC_RELAXED);
+  q = low | static_cast<std::uint64_t>(high & ~kMark) << 32;
 }
 
 // Returns the whole pages inside [begin, end) to the system; their contents read as zeros afterwards. For
@@ -964,7 +986,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   // than triangles.
   TriangleBuffer triangles(count * 23 / 10, 16);
   std::vector<FaceChunk> chunks;
-  const Vec3f* packed = positions.data();
+  Vec3f* packed = positions.data();
   const std::string& path = stream.path();
   auto process = [&](const std::vector<Triangle>& batch, std::size_t j) {
     FaceChunk& chunk = chunks[j];
@@ -985,7 +1007,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
             "a triangle refers to vertex " + std::to_string(largest) + " of " + std::to_string(vertex_count));
       }
       FaceChunk::Corners& g = gathered[i];
-      for (int k = 0; k < 3; ++k) unpack(packed[t[k]], g.cell[k], g.q[k]);
+      for (int k = 0; k < 3; ++k) unpack_marking(packed[t[k]], g.cell[k], g.q[k]);
     }
     // Then in phases over the chunk, each a loop of independent steps: a triangle's square root and
     // division would otherwise stall its own dependency chain.
@@ -1149,6 +1171,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
           std::uint32_t cell;
           std::uint64_t q;
           unpack(packed[v], cell, q);
+          if (!(q & kReferenced)) continue;
+          q &= ~kReferenced;
           if (cell != current) {
             flush();
             current = cell;
@@ -1172,6 +1196,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         std::uint32_t cell;
         std::uint64_t q;
         unpack(packed[v], cell, q);
+        if (!(q & kReferenced)) continue;
+        q &= ~kReferenced;
         const std::uint32_t s = chunk.slot(cell, normals, colors, uvs);
         ++chunk.points[s];
         chunk.point_sum[s] += dequantize(q).cast<float>();

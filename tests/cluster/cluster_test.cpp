@@ -807,6 +807,27 @@ TEST(Cluster, AttributesAreAveragedPerCell) {
   }
 }
 
+TEST(Cluster, UnreferencedVerticesChangeNothing) {
+  // Points no triangle uses (a scan's outliers, left in the vertex list) are not surface: they used to be
+  // averaged into their cells' means and attributes, moving mean representatives off the plane.
+  IndexedMesh plane = test::grid_square(40);
+  plane.normals.assign(plane.vertex_count(), Vec3f(0, 0, 1));
+  IndexedMesh strays = plane;
+  std::mt19937 random(3);
+  std::uniform_real_distribution<float> inside(0.0f, 1.0f);
+  for (int i = 0; i < 200; ++i) {
+    strays.positions.emplace_back(inside(random), inside(random), 0.3f * inside(random));
+    strays.normals.emplace_back(1, 0, 0);
+  }
+  for (Representative r : {Representative::mean, Representative::quadric, Representative::constrained}) {
+    const QuadricMesh a = run(plane, grid_options(12, r)), b = run(strays, grid_options(12, r));
+    ASSERT_EQ(a.mesh.vertex_count(), b.mesh.vertex_count()) << representative_name(r);
+    EXPECT_EQ(a.mesh.triangles, b.mesh.triangles) << representative_name(r);
+    EXPECT_EQ(a.mesh.positions, b.mesh.positions) << representative_name(r);
+    EXPECT_EQ(a.mesh.normals, b.mesh.normals) << representative_name(r);
+  }
+}
+
 TEST(Cluster, DropsCollapsedAndRepeatedTriangles) {
   const IndexedMesh mesh = test::sphere(5);
   ClusterStats stats;
