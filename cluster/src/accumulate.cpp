@@ -517,9 +517,15 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
     }
     level = grid.level;
     const double count = static_cast<double>(codes.size());
-    // Far too few cells: refine once or twice if the input has the vertices to fill them. A surface's
-    // occupied cells grow about 4x per level.
-    if (attempt < 2 && count < target / 8 && count < positions.size() / 4.0 && level < kCoordBits) {
+    // Far too few cells: refine once or twice if the input has the vertices to fill them; and as often as it
+    // takes while there are fewer than the target needs, until every vertex has a cell of its own. (Parts
+    // much closer together than the surface is wide, such as two layers of a thin shell, or a small part far
+    // from the rest, need many more levels than a surface spanning its box: the target was left short,
+    // although a finer grid reached it.) A surface's occupied cells grow about 4x per level.
+    const bool few = attempt < 2 && count < target / 8 && count < positions.size() / 4.0;
+    const bool short_of_target =
+        count < static_cast<double>(options.needed_cells) && count < positions.size();
+    if ((few || short_of_target) && level < kCoordBits) {
       level = std::min(
           kCoordBits,
           level + std::max(1, static_cast<int>(std::lround(std::log(target / count) / std::log(4.0)))));

@@ -108,6 +108,9 @@ struct PassOptions {
   // grid while there are more than twice as many and, for indexed input, refining it when there are far
   // fewer. 0: take the grid as given.
   std::uint64_t target_cells = 0;
+  // The fewest occupied cells that can reach the target (its vertex count, or half its face count): an
+  // indexed input's grid is refined until it has that many, or every vertex has a cell of its own.
+  std::uint64_t needed_cells = 0;
 };
 
 // The single pass over the stream.

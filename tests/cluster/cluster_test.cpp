@@ -344,6 +344,29 @@ TEST(Cluster, OctreeReturnsExactlyTheRequestedVertexCount) {
   EXPECT_LE(out.mesh.vertex_count(), mesh.vertex_count());
 }
 
+TEST(Cluster, TargetsAreReachedOnPartsMuchCloserThanTheirWidth) {
+  // Two layers of a thin shell, 1e-4 apart on a unit square: a surface spanning its box fills about 4x more
+  // cells per grid level, but these layers share every cell until the cells are thinner than the gap. The
+  // fine grid used to stop at the layers' shared cells (2601), short of both targets.
+  IndexedMesh shell = test::grid_square(50);
+  const Index n = static_cast<Index>(shell.vertex_count());
+  for (Index v = 0; v < n; ++v) shell.positions.push_back(shell.positions[v] + Vec3f(0, 0, 1e-4f));
+  const std::size_t faces = shell.face_count();
+  for (std::size_t f = 0; f < faces; ++f) {
+    const Triangle t = shell.triangles[f];
+    shell.triangles.push_back({t[0] + n, t[2] + n, t[1] + n});
+  }
+  ClusterStats stats;
+  const QuadricMesh octree = run(shell, octree_options(3000), &stats);
+  EXPECT_EQ(octree.mesh.vertex_count(), 3000u);
+  EXPECT_TRUE(stats.target_met);
+  ClusterOptions grid;
+  grid.target_faces = 10000;
+  const QuadricMesh regridded = run(shell, grid, &stats);
+  EXPECT_LE(regridded.mesh.face_count(), 10000u);
+  EXPECT_GE(regridded.mesh.face_count(), 9900u);
+}
+
 TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
   const IndexedMesh mesh = lumpy_sphere_with_holes();
   for (std::uint64_t faces : {200ull, 1500ull}) {
