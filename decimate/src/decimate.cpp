@@ -119,7 +119,8 @@ struct alignas(64) Vertex {
   Index live_faces;            // 0: removed (or never used)
   std::uint32_t stamp, mark;   // scratch for neighbourhood maps
   Index seg_cap;               // room in this vertex's own segment (its input valence)
-  Quadric q;                   // relative to the local origin
+  std::uint32_t retry_asks;  // retries of its blocked edges asked since the last one done (see retry_around)
+  Quadric q;                 // relative to the local origin
 };
 static_assert(sizeof(Vertex) == 128);
 }  // namespace
@@ -401,6 +402,7 @@ struct Decimator {
         x.seg_next = static_cast<Index>(v);
         x.stamp = 0;
         x.mark = 0;
+        x.retry_asks = 0;
         x.q = Quadric{};
       }
     });
@@ -1580,14 +1582,25 @@ struct Decimator {
 
     // The next pair's face lists arrived during the work above; its faces load during the re-costs.
     prefetch_stage(next, 3);
+    // Every pair of k is re-costed; its blocked ones only when a retry around k is due (see retry_due).
+    const bool retry_k = retry_due(vk);
+    bool kept_blocked = false;
     for (const Neighbour& n : nbrs) {
-      if (!edge_dead(n.edge)) recost_inline(n.edge);
+      const std::uint32_t slot = egs[n.edge].slot;
+      if (slot == kDead) continue;
+      if (!retry_k && (slot == kBlockedFlip || slot == kBlockedTopology)) {
+        kept_blocked = true;
+        continue;
+      }
+      recost_inline(n.edge);
     }
     if (!virtual_pairs.empty()) {
       for (Index id : virtual_pairs[k]) recost(id);
     }
-    vk.flags &= ~kHasBlocked;
-    for (std::size_t i = 0; i < nbrs.size(); ++i) {
+    vk.flags = kept_blocked ? vk.flags | kHasBlocked : vk.flags & ~kHasBlocked;
+    // The neighbours' blocked edges, too, when due: around k (k's many neighbours each retrying its blocked
+    // edge into k's fan cost as much as k's own retry) and around each neighbour.
+    for (std::size_t i = 0; i < nbrs.size() && retry_k; ++i) {
       const Index x = nbrs[i].x;
       if (vtx[x].flags & kHasBlocked) retry_around(x);
     }
@@ -1628,9 +1641,24 @@ struct Decimator {
     std::vector<Index>().swap(virtual_pairs[v]);
   }
 
-  // Blocked edges around x get another chance now that x's neighbourhood changed.
+  // Whether the blocked edges around v get another chance at this change of its neighbourhood. Around a
+  // vertex of many faces, only at every (faces / kRetryFaces)-th change: each retry re-costs every blocked
+  // edge of its fan, and each of those that comes up is checked against the whole fan again, so a fan of
+  // thousands (a cone's apex, an edge shared by thousands of faces) made every collapse next to it cost
+  // millions of steps and ran for minutes. Small fans, nearly all of them, retry at every change. (The run's
+  // last resort, retrying every blocked edge when the queue runs dry, still covers them all.)
+  static constexpr std::uint32_t kRetryFaces = 16;
+  static bool retry_due(Vertex& v) {
+    if (++v.retry_asks * std::uint64_t{kRetryFaces} < v.live_faces) return false;
+    v.retry_asks = 0;
+    return true;
+  }
+
+  // Blocked edges around x get another chance now that x's neighbourhood changed (see retry_due).
   void retry_around(Index x) {
-    verts[x].flags &= ~kHasBlocked;
+    Vertex& v = verts[x];
+    if (!retry_due(v)) return;
+    v.flags &= ~kHasBlocked;
     gather_faces(x, scratch_faces);
     for (Index f : scratch_faces) {
       const Face& face = faces[f];
