@@ -1392,20 +1392,21 @@ struct Decimator {
     const bool pair_orphaned = fa.size() + fb.size() == 2 * kf;
     const std::uint64_t kv = 1 + orphans + (pair_orphaned ? 1 : 0);
 
-    if (!overshoot) {
-      bool fits = true;
-      if (target_f > 0 && faces_alive - kf < target_f) {
-        // One below is the best a closed manifold allows when one face is left to remove: every collapse
-        // removes two unless it is on a boundary edge, and none is left.
-        const bool parity = faces_alive - target_f == 1 && kf == 2 && boundary_edges == 0;
-        if (!parity) fits = false;
-      }
-      if (target_v > 0 && verts_alive - kv < target_v) fits = false;
-      if (!fits) {
-        heap.remove(e, kDeferred);
-        deferred.push_back(e);
-        return;
-      }
+    bool fits = true;
+    if (target_f > 0 && faces_alive - kf < target_f) {
+      // One below is the best a closed manifold allows when one face is left to remove: every collapse
+      // removes two unless it is on a boundary edge, and none is left. Once every other candidate is spent
+      // (`overshoot`), one below is taken anywhere; never more, which took the last collapse of a mesh whose
+      // remaining pairs each removed many faces (every face, on a fan around one edge) to 0 faces.
+      const bool one_below =
+          faces_alive - kf + 1 == target_f && (overshoot || (kf == 2 && boundary_edges == 0));
+      if (!one_below) fits = false;
+    }
+    if (target_v > 0 && verts_alive - kv < target_v) fits = false;
+    if (!fits) {
+      heap.remove(e, kDeferred);
+      deferred.push_back(e);
+      return;
     }
     if (opt.preserve_topology && (orphans > 0 || pair_orphaned || !link_condition(a, b))) {
       ++stats.rejected_topology;

@@ -197,6 +197,33 @@ TEST(Decimate, ExactVertexCounts) {
   }
 }
 
+TEST(Decimate, CountsNeverFallMoreThanParityAllows) {
+  // When the only pairs left remove many faces or vertices at once, the count target is reported blocked
+  // rather than passed: the last resort used to take any of them, which took ten copies of one triangle to
+  // no faces for a target of 3, and fifty separate triangles to 3 vertices for a target of 5.
+  IndexedMesh copies;
+  copies.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  copies.triangles.assign(10, Triangle{0, 1, 2});
+  const DecimateResult few = run(copies, faces(3));
+  EXPECT_GE(few.mesh.face_count(), 2u);
+  EXPECT_EQ(few.stats.stop, DecimateStop::blocked) << few.stats.reason;
+  EXPECT_NE(few.stats.reason.find("overshoot"), std::string::npos) << few.stats.reason;
+
+  IndexedMesh separate;
+  for (Index i = 0; i < 50; ++i) {
+    const float x = 3.0f * static_cast<float>(i);
+    separate.positions.insert(separate.positions.end(), {{x, 0, 0}, {x + 1, 0, 0}, {x, 1, 0}});
+    separate.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
+  }
+  for (std::uint64_t target : {5u, 7u, 30u}) {
+    DecimateOptions o;
+    o.target_vertices = target;
+    const DecimateResult r = run(separate, o);
+    EXPECT_GE(r.mesh.vertex_count(), target);
+    EXPECT_EQ(r.mesh.vertex_count() == target, r.stats.stop == DecimateStop::target_reached) << target;
+  }
+}
+
 TEST(Decimate, AFanOfThousandsIsNotRecheckedAtEveryCollapse) {
   // 2,000 triangles on one edge: every collapse next to its ends used to put each blocked pair of the fan
   // back in the queue, each checked against the whole fan again (51 rejected collapses per collapse done;
