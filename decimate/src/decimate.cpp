@@ -131,6 +131,13 @@ inline constexpr bool decimate_detail::filled_after_resize<Vertex> = true;
 
 namespace {
 
+// The nearest float: a placement a little beyond a surface that spans nearly the float range (where
+// tangent planes meet beyond its extreme) is past the largest float, and the vertex became infinite.
+inline float to_float(double x) {
+  constexpr double kLargest = std::numeric_limits<float>::max();
+  return static_cast<float>(std::clamp(x, -kLargest, kLargest));
+}
+
 struct Face {
   Index v[3];           // v[0] == kNone: dead
   Index e[3];           // e[i]: the edge from corner i to corner i+1
@@ -1480,9 +1487,7 @@ struct Decimator {
 
     stats.max_error = std::max(stats.max_error, distance(pl.error, trace(q)));
     interpolate_attributes(a, b, k, pl.point);
-    vk.p[0] = static_cast<float>(origin.x() + pl.point.x());
-    vk.p[1] = static_cast<float>(origin.y() + pl.point.y());
-    vk.p[2] = static_cast<float>(origin.z() + pl.point.z());
+    for (int a = 0; a < 3; ++a) vk.p[a] = to_float(origin[a] + pl.point[a]);
     vk.q = {q.a00, q.a01, q.a02, q.a11, q.a12, q.a22, q.b0, q.b1, q.b2, q.c};
     vk.flags = (vk.flags | vr.flags) & kLocked;
 

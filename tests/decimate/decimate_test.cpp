@@ -242,6 +242,20 @@ TEST(Decimate, AFanOfThousandsIsNotRecheckedAtEveryCollapse) {
   EXPECT_LT(r.stats.rejected_flip, 10 * r.stats.collapses);
 }
 
+TEST(Decimate, ASphereSpanningNearlyTheFloatRangeStaysFinite) {
+  // Placements a little beyond the extreme of a sphere of radius 3e38 were past the largest float, and the
+  // output had infinite vertices (the writer then refused it, blaming the output file).
+  IndexedMesh sphere = test::sphere(3);
+  for (Vec3f& p : sphere.positions) p *= 3e38f;
+  for (std::uint64_t target : {3u, 6u, 20u}) {
+    DecimateOptions o;
+    o.target_vertices = target;
+    const DecimateResult r = run(sphere, o);
+    EXPECT_EQ(r.mesh.vertex_count(), target);
+    for (const Vec3f& p : r.mesh.positions) EXPECT_TRUE(p.allFinite()) << target;
+  }
+}
+
 TEST(Decimate, ExactCountsOnOpenMesh) {
   const IndexedMesh bumpy =
       height_field(30, [](double x, double y) { return 0.1 * std::sin(6 * x) * std::cos(5 * y); });
