@@ -131,13 +131,6 @@ inline constexpr bool decimate_detail::filled_after_resize<Vertex> = true;
 
 namespace {
 
-// The nearest float: a placement a little beyond a surface that spans nearly the float range (where
-// tangent planes meet beyond its extreme) is past the largest float, and the vertex became infinite.
-inline float to_float(double x) {
-  constexpr double kLargest = std::numeric_limits<float>::max();
-  return static_cast<float>(std::clamp(x, -kLargest, kLargest));
-}
-
 struct Face {
   Index v[3];           // v[0] == kNone: dead
   Index e[3];           // e[i]: the edge from corner i to corner i+1
@@ -1487,7 +1480,8 @@ struct Decimator {
 
     stats.max_error = std::max(stats.max_error, distance(pl.error, trace(q)));
     interpolate_attributes(a, b, k, pl.point);
-    for (int a = 0; a < 3; ++a) vk.p[a] = to_float(origin[a] + pl.point[a]);
+    const Vec3f placed = nearest_float(origin + pl.point);
+    for (int a = 0; a < 3; ++a) vk.p[a] = placed[a];
     vk.q = {q.a00, q.a01, q.a02, q.a11, q.a12, q.a22, q.b0, q.b1, q.b2, q.c};
     vk.flags = (vk.flags | vr.flags) & kLocked;
 

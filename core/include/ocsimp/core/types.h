@@ -19,6 +19,14 @@ using Triangle = std::array<Index, 3>;
 // RGBA, 8 bits a channel: what PLY, Draco and most scanners store.
 using Color = std::array<std::uint8_t, 4>;
 
+// A computed point as the nearest float point. Placements can lie a little beyond the input (where tangent
+// planes meet past a curved surface's extreme), and for an input spanning nearly the float range that is past
+// the largest float: rounded, it would be infinite.
+inline Vec3f nearest_float(const Vec3d& p) {
+  const double largest = std::numeric_limits<float>::max();
+  return p.cwiseMax(-largest).cwiseMin(largest).cast<float>();
+}
+
 // Axis-aligned bounding box; empty (lo > hi) until the first point is added.
 struct Box3 {
   Vec3d lo{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
