@@ -67,6 +67,32 @@ TEST(Pipeline, NeverAboveTheTarget) {
   EXPECT_GE(result.mesh.face_count(), 2'000u);
 }
 
+TEST(Pipeline, AnIntermediateBelowTheTargetIsReportedShort) {
+  // A thousand separate triangles: the clustering stage's largest face count not above the target merges
+  // whole triangles at once and lands well below it, where the decimator has nothing to do. That used to be
+  // reported as the target reached.
+  test::TempDir dir;
+  IndexedMesh pieces;
+  for (Index i = 0; i < 1000; ++i) {
+    const float x = static_cast<float>(i % 40), y = static_cast<float>(i / 40);
+    pieces.positions.insert(pieces.positions.end(), {{x, y, 0}, {x + 0.3f, y, 0}, {x, y + 0.3f, 0.1f}});
+    pieces.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
+  }
+  const std::string path = dir / "pieces.ply";
+  write_mesh(path, pieces);
+  SimplifyOptions options;
+  options.target_faces = 100;
+  options.two_stage = true;
+  options.intermediate = 1;
+  const SimplifyResult result = simplify(path, options);
+  ASSERT_TRUE(result.clustered);
+  EXPECT_LE(result.mesh.face_count(), 100u);
+  EXPECT_EQ(result.decimate.target_reached, result.mesh.face_count() == 100u) << result.decimate.reason;
+  if (!result.decimate.target_reached) {
+    EXPECT_NE(result.decimate.reason.find("clustering stage"), std::string::npos) << result.decimate.reason;
+  }
+}
+
 TEST(Pipeline, RatioIsOfTheInputFaces) {
   test::TempDir dir;
   const std::string path = write_scan(dir, 40'000, 1);

@@ -205,6 +205,19 @@ void report_first_stage(FirstStage& stage, Result& result) {
   result.memory_limit = stage.memory_limit;
 }
 
+// A decimation that started below its face target because the clustering stage went there (its grid
+// merges whole small parts at once, so "the largest count not above" can be far below) did not reach it,
+// whatever the decimator, which saw only the intermediate mesh, says.
+void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, std::uint64_t decimate_in,
+                                DecimateStats& stats) {
+  if (!stage.clustered || target == 0 || decimate_in >= target || stage.input_faces <= target) return;
+  stats.target_reached = false;
+  stats.stop = DecimateStop::blocked;
+  stats.reason = "stopped at " + std::to_string(stats.faces) + " faces (target " + std::to_string(target) +
+                 " faces): the clustering stage left only " + std::to_string(decimate_in) +
+                 " faces, as its grid merged whole small parts (a larger --intermediate keeps more)";
+}
+
 }  // namespace
 
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
@@ -233,6 +246,7 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   const auto start = Clock::now();
   const std::uint64_t decimate_in = stage.mesh.mesh.face_count();
   DecimateResult decimated = decimate(std::move(stage.mesh), decimate_options);
+  check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
   result.phases.push_back(
@@ -282,6 +296,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     if (i > 0 || borders_carried(stage, options.cluster)) decimate_options.boundary_weight = 0;
     const std::uint64_t faces_in = input.mesh.face_count();
     DecimateResult decimated = decimate(std::move(input), decimate_options);
+    check_intermediate_reached(stage, levels[i], faces_in, decimated.stats);
 
     LodLevel level;
     level.target_faces = levels[i];
