@@ -87,7 +87,7 @@ inline std::string quote_token(const char* p, const char* end) {
   return "'" + token + (e - p > 40 ? "...'" : "'");
 }
 
-enum class NumberStatus { ok, missing, malformed, not_finite };
+enum class NumberStatus { ok, missing, malformed, not_finite, beyond_float };
 
 // Parses one finite float token starting at p (after blanks); on success advances p past it. The token must
 // end at a blank or at `end`: "1.5x" is malformed, not 1.5. Decimal text is rounded once, straight to float.
@@ -98,7 +98,12 @@ inline NumberStatus parse_float(const char*& p, const char* end, float& value) {
   const auto result = fast_float::from_chars(digits, end, value);
   if (result.ec != std::errc() || (result.ptr < end && !is_blank(*result.ptr)))
     return NumberStatus::malformed;
-  if (!std::isfinite(value)) return NumberStatus::not_finite;
+  if (!std::isfinite(value)) {
+    // A finite number too large for a float (1e39) is told apart from a written NaN or infinity.
+    double wide = 0;
+    fast_float::from_chars(digits, end, wide);
+    return std::isfinite(wide) ? NumberStatus::beyond_float : NumberStatus::not_finite;
+  }
   p = result.ptr;
   return NumberStatus::ok;
 }
@@ -111,6 +116,8 @@ inline std::string describe(NumberStatus status, const char* p, const char* end)
       return "not a number: " + quote_token(p, end);
     case NumberStatus::not_finite:
       return "NaN or infinite number: " + quote_token(p, end);
+    case NumberStatus::beyond_float:
+      return "number beyond the float range (+-3.4e38), which positions are held in: " + quote_token(p, end);
     case NumberStatus::ok:
       break;
   }

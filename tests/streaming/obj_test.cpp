@@ -305,7 +305,7 @@ const std::vector<test::MalformedCase> kMalformed = {
     {"number_with_suffix.obj", FilePosition::Kind::line, 3, "not a number: '0.5mm'"},
     {"nan_vertex.obj", FilePosition::Kind::line, 3, "NaN or infinite"},
     {"inf_normal.obj", FilePosition::Kind::line, 4, "NaN or infinite"},
-    {"overflow_vertex.obj", FilePosition::Kind::line, 1, "NaN or infinite"},
+    {"overflow_vertex.obj", FilePosition::Kind::line, 1, "beyond the float range"},
     {"vertex_two_coords.obj", FilePosition::Kind::line, 2, "a vertex needs x y z"},
     {"vertex_too_many_numbers.obj", FilePosition::Kind::line, 1, "too many numbers"},
     {"normal_two_coords.obj", FilePosition::Kind::line, 4, "a normal needs x y z"},
