@@ -500,7 +500,11 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
     return codes;
   }
   const double target = static_cast<double>(options.target_cells);
+  const double needed = static_cast<double>(options.needed_cells);
   int level = grid.level;
+  // Refinements stop after this many attempts (every level about twice over: no rule below should get
+  // there). Then the loop can only coarsen, and a grid of one cell always fits, so it ends on a counted grid.
+  constexpr int kMaxRefinements = 2 * kCoordBits + 4;
   for (int attempt = 0;; ++attempt) {
     grid = Grid::power_of_two(bounds, level);
     const std::size_t cap = static_cast<std::size_t>(std::min(8 * target + 1024, 4e9));
@@ -509,10 +513,15 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
       level = std::max(0, level - 2);
       continue;
     }
-    // Halving the grid merges each group of up to 8 siblings, which are contiguous in Morton order.
+    // Halving the grid merges each group of up to 8 siblings, which are contiguous in Morton order. Never
+    // below the cells the target needs: that undid the refinement below, and the two took turns forever.
+    std::vector<std::uint64_t> coarser;
     while (codes.size() > 2 * target && grid.level > 0) {
-      for (std::uint64_t& c : codes) c >>= 3;
-      codes.erase(std::unique(codes.begin(), codes.end()), codes.end());
+      coarser.resize(codes.size());
+      std::transform(codes.begin(), codes.end(), coarser.begin(), [](std::uint64_t c) { return c >> 3; });
+      coarser.erase(std::unique(coarser.begin(), coarser.end()), coarser.end());
+      if (static_cast<double>(coarser.size()) < needed) break;
+      codes.swap(coarser);
       grid = grid.coarser();
     }
     level = grid.level;
@@ -522,13 +531,14 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
     // much closer together than the surface is wide, such as two layers of a thin shell, or a small part far
     // from the rest, need many more levels than a surface spanning its box: the target was left short,
     // although a finer grid reached it.) A surface's occupied cells grow about 4x per level.
+    // Short of the target only, one level at a time: a level multiplies the cells by at most 8, so the
+    // count stays under the cap (8 x target, and target >= needed).
     const bool few = attempt < 2 && count < target / 8 && count < positions.size() / 4.0;
-    const bool short_of_target =
-        count < static_cast<double>(options.needed_cells) && count < positions.size();
-    if ((few || short_of_target) && level < kCoordBits) {
-      level = std::min(
-          kCoordBits,
-          level + std::max(1, static_cast<int>(std::lround(std::log(target / count) / std::log(4.0)))));
+    const bool short_of_target = count < needed && count < positions.size();
+    if ((few || short_of_target) && level < kCoordBits && attempt < kMaxRefinements) {
+      const int step =
+          few ? std::max(1, static_cast<int>(std::lround(std::log(target / count) / std::log(4.0)))) : 1;
+      level = std::min(kCoordBits, level + step);
       continue;
     }
     break;

@@ -367,6 +367,23 @@ TEST(Cluster, TargetsAreReachedOnPartsMuchCloserThanTheirWidth) {
   EXPECT_GE(regridded.mesh.face_count(), 9900u);
 }
 
+TEST(Cluster, FineGridChoiceEndsWhenCoarseningWouldFallShort) {
+  // With about one fine cell per targeted vertex (the pipeline asks for few), halving a grid of too many
+  // cells fell below the cells the target needs, refining took it back, and the two took turns forever (a 10
+  // M scan's two-stage run hung). The coarsening now stops short of that.
+  const IndexedMesh sphere = test::sphere(6);
+  for (std::uint64_t faces : {1500ull, 3000ull, 6000ull}) {
+    ClusterOptions options;
+    options.target_faces = faces;
+    options.fine_cells_per_target = 1;
+    ClusterStats stats;
+    const QuadricMesh out = run(sphere, options, &stats);
+    EXPECT_GE(stats.fine_cells, faces / 2) << faces;
+    EXPECT_LE(out.mesh.face_count(), faces);
+    EXPECT_GT(out.mesh.face_count(), faces / 2) << faces;
+  }
+}
+
 TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
   const IndexedMesh mesh = lumpy_sphere_with_holes();
   for (std::uint64_t faces : {200ull, 1500ull}) {
