@@ -159,6 +159,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.fine_cells_per_target =
       fine_cells_for(static_cast<double>(cluster_options.target_faces), fine_per_vertex) /
       (static_cast<double>(cluster_options.target_faces) / 2);
+  cluster_options.refine_to_reach = false;  // the capped fine grid above is the point
   cluster_options.threads = static_cast<unsigned>(std::max(options.threads, 0));
   cluster_options.progress = options.progress;
   start = Clock::now();

@@ -79,6 +79,11 @@ struct ClusterOptions {
   // Target-driven modes accumulate on a fine power-of-two grid of about this many occupied cells per
   // targeted output vertex (a face target counts as target_faces / 2 vertices), then merge.
   double fine_cells_per_target = 8;
+  // Target-driven modes on indexed input: refine the fine grid until it holds as many cells as the target
+  // needs (or one per vertex), so that thin shells and far-apart parts reach it too. The pipeline turns this
+  // off: its intermediate need not be exact, and the fine grid it caps for speed would grow 4x a level
+  // (a 10 M scan's two-stage run to 1 %: 2.3 s and 174 MB capped, 4.9 s and 562 MB refined, same result).
+  bool refine_to_reach = true;
 
   Representative representative = Representative::quadric;
 
