@@ -526,13 +526,12 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
     }
     level = grid.level;
     const double count = static_cast<double>(codes.size());
-    // Far too few cells: refine once or twice if the input has the vertices to fill them; and as often as it
-    // takes while there are fewer than the target needs, until every vertex has a cell of its own. (Parts
-    // much closer together than the surface is wide, such as two layers of a thin shell, or a small part far
-    // from the rest, need many more levels than a surface spanning its box: the target was left short,
-    // although a finer grid reached it.) A surface's occupied cells grow about 4x per level.
-    // Short of the target only, one level at a time: a level multiplies the cells by at most 8, so the
-    // count stays under the cap (8 x target, and target >= needed).
+    // Far too few cells: refine once or twice, by the levels a surface needs (its occupied cells grow about
+    // 4x per level), if the input has the vertices to fill them. And while there are fewer than the target
+    // needs, one level at a time until every vertex has a cell of its own: parts much closer together than
+    // the surface is wide (two layers of a thin shell) or a small part far from the rest need many more
+    // levels than a surface spanning its box. One level multiplies the cells by at most 8, which keeps the
+    // count under the cap (8 x target, and target >= needed).
     const bool few = attempt < 2 && count < target / 8 && count < positions.size() / 4.0;
     const bool short_of_target = count < needed && count < positions.size();
     if ((few || short_of_target) && level < kCoordBits && attempt < kMaxRefinements) {

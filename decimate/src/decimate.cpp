@@ -119,7 +119,7 @@ struct alignas(64) Vertex {
   Index live_faces;            // 0: removed (or never used)
   std::uint32_t stamp, mark;   // scratch for neighbourhood maps
   Index seg_cap;               // room in this vertex's own segment (its input valence)
-  std::uint32_t retry_asks;  // retries of its blocked edges asked since the last one done (see retry_around)
+  std::uint32_t retry_asks;  // retries of its blocked edges asked since the last one done (see retry_due)
   Quadric q;                 // relative to the local origin
 };
 static_assert(sizeof(Vertex) == 128);
@@ -1600,9 +1600,10 @@ struct Decimator {
     vk.flags = kept_blocked ? vk.flags | kHasBlocked : vk.flags & ~kHasBlocked;
     // The neighbours' blocked edges, too, when due: around k (k's many neighbours each retrying its blocked
     // edge into k's fan cost as much as k's own retry) and around each neighbour.
-    for (std::size_t i = 0; i < nbrs.size() && retry_k; ++i) {
-      const Index x = nbrs[i].x;
-      if (vtx[x].flags & kHasBlocked) retry_around(x);
+    if (retry_k) {
+      for (const Neighbour& n : nbrs) {
+        if (vtx[n.x].flags & kHasBlocked) retry_around(n.x);
+      }
     }
     ++stats.collapses;
   }
