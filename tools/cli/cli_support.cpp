@@ -195,6 +195,12 @@ void check_destination(const std::string& path) {
   AtomicFile probe(path);  // creates, then (uncommitted) deletes, a temporary beside the destination
 }
 
+FileFormat check_mesh_destination(const std::string& path) {
+  const FileFormat format = format_from_extension(path);
+  check_destination(path);
+  return format;
+}
+
 void write_json_report(const std::string& path, const nlohmann::json& report) {
   AtomicFile file(path);
   file.write(report.dump(2));

@@ -56,6 +56,8 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
 // folder that does not exist or cannot take a new file (hours of clustering would otherwise be lost, or the
 // mesh written and the command then fail on its report).
 void check_destination(const std::string& path);
+// A mesh destination: its extension must name a format (returned), and check_destination must pass.
+FileFormat check_mesh_destination(const std::string& path);
 
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);

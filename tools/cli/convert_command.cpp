@@ -24,8 +24,7 @@ void add_convert_command(CLI::App& app) {
       ->check(whole_number(0, 10));
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
-    format_from_extension(flags->output);  // refuse an unknown output format before reading anything
-    check_destination(flags->output);
+    check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     ReadOptions read;
     read.progress = make_progress(flags->quiet);
     flags->write.progress = read.progress;

@@ -66,8 +66,7 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
-    format_from_extension(flags->output);  // refuse an unknown output format before reading anything
-    check_destination(flags->output);
+    check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_destination(flags->report);
     DecimateOptions options = flags->options;
     const auto limit = limit_threads(options.threads);

@@ -44,8 +44,7 @@ void add_gen_command(CLI::App& app) {
     const auto start = std::chrono::steady_clock::now();
     flags->options.progress = make_progress(flags->quiet);
     GeneratedCounts counts;
-    check_destination(flags->output);
-    if (format_from_extension(flags->output) == FileFormat::ply) {
+    if (check_mesh_destination(flags->output) == FileFormat::ply) {
       counts = generate_scan_ply(flags->output, flags->options);
     } else {
       const IndexedMesh mesh = generate_scan_mesh(flags->options);

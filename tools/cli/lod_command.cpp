@@ -94,8 +94,7 @@ void add_lod_command(CLI::App& app) {
     const bool several = options.level_faces.size() > 1;
     // Refuse a bad pattern or format before reading anything.
     for (std::uint64_t faces : options.level_faces) {
-      format_from_extension(lod_level_path(flags->output, faces, several));
-      check_destination(lod_level_path(flags->output, faces, several));
+      check_mesh_destination(lod_level_path(flags->output, faces, several));
     }
     if (!flags->report.empty()) check_destination(flags->report);
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);

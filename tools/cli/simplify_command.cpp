@@ -75,8 +75,7 @@ void add_simplify_command(CLI::App& app) {
     if (options.target_faces == 0 && options.target_ratio == 0 && !std::isfinite(options.max_error)) {
       throw Error("simplify: give --faces, --ratio or --max-error");
     }
-    format_from_extension(flags->output);  // refuse an unknown output format before reading anything
-    check_destination(flags->output);
+    check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_destination(flags->report);
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const ProgressFn progress = make_progress(flags->quiet);
