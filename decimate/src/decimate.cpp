@@ -50,6 +50,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -1796,21 +1797,19 @@ struct Decimator {
     parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = begin; v < end; ++v) ids[v] = cells[ids[v]];
     });
-    // Interior: every vertex it shares a live face with is in its region. Marked in a second array, as the
-    // first is read for the neighbours meanwhile.
+    // Interior: every vertex it shares a live face with is in its region. A live face whose corners lie in
+    // more than one region marks all three outside, in a second array, as the first is read meanwhile. One
+    // pass over the faces: going through each vertex's face list read every face three times and was most of
+    // this function's instructions. Threads may mark one vertex at once, all with the same value: relaxed
+    // atomic stores (plain byte stores on x86).
     std::vector<std::uint8_t> outside(nv, 0);
-    parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = begin; v < end; ++v) {
-        const std::uint32_t r = ids[v];
-        if (r == kOutside) {
-          outside[v] = 1;
-          continue;
-        }
-        bool out = false;
-        for_live_faces(static_cast<Index>(v), [&](Index f) {
-          for (Index w : faces[f].v) out = out || ids[w] != r;
-        });
-        outside[v] = out;
+    parallel_chunks(faces.size(), 16384, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) {
+        const Face& face = faces[f];
+        if (face.v[0] == kNone) continue;
+        const std::uint32_t r = ids[face.v[0]];
+        if (ids[face.v[1]] == r && ids[face.v[2]] == r) continue;
+        for (Index v : face.v) std::atomic_ref<std::uint8_t>(outside[v]).store(1, std::memory_order_relaxed);
       }
     });
     parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
