@@ -362,6 +362,48 @@ std::vector<double> longest_edges(const IndexedMesh& mesh) {
   return longest;
 }
 
+TEST(Decimate, PoorlyConditionedPairsStillMoveOffTheirEdge) {
+  // A finely cut tube: every pair's planes share the axis direction, so no 3x3 solve is well conditioned.
+  // The segment alone left each vertex on a chord, inside the tube; the regularized step from the segment's
+  // best point moves it out to where the tangent planes meet, so the faces straddle the surface.
+  constexpr int kAround = 96, kAlong = 48;
+  IndexedMesh tube;
+  for (int j = 0; j <= kAlong; ++j) {
+    for (int i = 0; i < kAround; ++i) {
+      const double angle = 2 * M_PI * i / kAround;
+      tube.positions.emplace_back(static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle)),
+                                  static_cast<float>(2.0 * j / kAlong));
+    }
+  }
+  for (Index j = 0; j < kAlong; ++j) {
+    for (Index i = 0; i < kAround; ++i) {
+      const Index a = j * kAround + i, b = j * kAround + (i + 1) % kAround;
+      tube.triangles.push_back({a, b, b + kAround});
+      tube.triangles.push_back({a, b + kAround, a + kAround});
+    }
+  }
+  const DecimateResult r = run(tube, faces(tube.face_count() / 20));
+  ASSERT_EQ(r.mesh.face_count(), tube.face_count() / 20);
+  // Distance to the tube of points spread over every output face (a 6 x 6 barycentric grid).
+  double sum2 = 0;
+  std::size_t count = 0;
+  for (const Triangle& t : r.mesh.triangles) {
+    const Vec3d p0 = r.mesh.positions[t[0]].cast<double>(), p1 = r.mesh.positions[t[1]].cast<double>(),
+                p2 = r.mesh.positions[t[2]].cast<double>();
+    for (int u = 0; u <= 6; ++u) {
+      for (int v = 0; u + v <= 6; ++v) {
+        const Vec3d p = p0 + (p1 - p0) * (u / 6.0) + (p2 - p0) * (v / 6.0);
+        const double gap = std::hypot(p.x(), p.y()) - 1;
+        sum2 += gap * gap;
+        ++count;
+      }
+    }
+  }
+  const double rms = std::sqrt(sum2 / double(count));
+  // 0.00128 with the segment alone, 0.00081 with the step.
+  EXPECT_LT(rms, 1e-3);
+}
+
 TEST(Decimate, SphereVerticesStayNearTheSphere) {
   const IndexedMesh sphere = test::sphere(5);
   const DecimateResult r = run(sphere, faces(500));

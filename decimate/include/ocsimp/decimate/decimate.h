@@ -3,8 +3,9 @@
 //
 // Every edge (and, on request, every close vertex pair) is a candidate. A candidate's placement is its summed
 // quadric's minimizer (explicit 3x3 solve in double around the edge midpoint) when the system is well
-// conditioned and the minimizer lies within two edge lengths; otherwise the best point of the edge segment,
-// which includes both endpoints and the midpoint, ties going to an endpoint. Its cost is the summed quadric Q
+// conditioned and the minimizer lies within two edge lengths; otherwise the best point of the edge segment
+// (which includes both endpoints and the midpoint, ties going to an endpoint), moved by a regularized Newton
+// step toward the minimizer along the directions the quadric constrains. Its cost is the summed quadric Q
 // at the placement; the queue is ordered by Q / sqrt(trace A) (see decimate.cpp for why) and kept exact:
 // after every collapse all pairs around the new vertex are re-costed.
 //
