@@ -120,8 +120,8 @@ struct alignas(64) Vertex {
   Index live_faces;            // 0: removed (or never used)
   std::uint32_t stamp, mark;   // scratch for neighbourhood maps
   Index seg_cap;               // room in this vertex's own segment (its input valence)
-  std::uint32_t retry_asks;  // retries of its blocked edges asked since the last one done (see retry_due)
-  Quadric q;                 // relative to the local origin
+  std::uint32_t retry_asks;    // retries of its blocked edges asked since the last one done (see retry_due)
+  Quadric q;                   // relative to the local origin
 };
 static_assert(sizeof(Vertex) == 128);
 }  // namespace
