@@ -39,7 +39,8 @@ using Corners = std::array<Vec3f, 3>;
 bool looks_ascii(ByteReader& reader) {
   const std::size_t n = reader.fill(512);
   std::string_view head(reader.data(), n);
-  const std::size_t first = head.find_first_not_of(" \t\r\n");
+  const std::size_t bom = head.starts_with("\xEF\xBB\xBF") ? 3 : 0;  // UTF-8 byte order mark
+  const std::size_t first = head.find_first_not_of(" \t\r\n", bom);
   if (first == std::string_view::npos || head.size() < first + 5) return false;
   for (std::size_t i = 0; i < 5; ++i) {
     if ((head[first + i] | 0x20) != "solid"[i]) return false;  // any case

@@ -45,6 +45,8 @@ class LineReader {
     ++line_;
     if (length > 0 && data[length - 1] == '\r') --length;
     line = std::string_view(data, length);
+    // A UTF-8 byte order mark before the first line (as some Windows editors write) is not part of it.
+    if (line_ == 1 && line.starts_with("\xEF\xBB\xBF")) line.remove_prefix(3);
     return true;
   }
 

@@ -89,6 +89,15 @@ TEST(Obj, NegativeIndicesCountBackFromTheLine) {
   EXPECT_EQ(m.uvs[0], Vec2f::Zero());
 }
 
+TEST(Obj, AByteOrderMarkIsNotPartOfTheFirstLine) {
+  // The mark hid the first vertex statement, so every index pointed one vertex too far.
+  TempDir dir;
+  const IndexedMesh m = read_text(dir, "\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n");
+  ASSERT_EQ(m.positions.size(), 4u);
+  EXPECT_EQ(m.positions[0], Vec3f(0, 0, 0));
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 1, 3}}));
+}
+
 TEST(Obj, PolygonsAreFanTriangulated) {
   TempDir dir;
   const IndexedMesh m =

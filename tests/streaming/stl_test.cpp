@@ -88,6 +88,18 @@ TEST(Stl, AsciiRoundTripIsExact) {
   test::expect_same_faces(mesh, back, test::match_vertices(mesh, back, 0.0));
 }
 
+TEST(Stl, AsciiAfterAByteOrderMarkIsStillAscii) {
+  // Read as binary, its first bytes made a triangle count of about 1.8 billion.
+  TempDir dir;
+  const IndexedMesh mesh = test::sphere(1);
+  WriteOptions options;
+  options.ascii = true;
+  write_mesh(dir / "s.stl", mesh, options);
+  test::write_file_bytes(dir / "s.stl", "\xEF\xBB\xBF" + test::read_file_bytes(dir / "s.stl"));
+  const IndexedMesh back = read_mesh(dir / "s.stl");
+  expect_same_soup(mesh, back);
+}
+
 TEST(Stl, BinaryHeaderSayingSolidIsStillBinary) {
   TempDir dir;
   const IndexedMesh mesh = test::cube(2);
