@@ -176,6 +176,22 @@ TEST(Cli, AResultWithoutFacesIsWrittenWithAWarning) {
   EXPECT_GT(read_mesh(result).face_count(), 0u);
 }
 
+// An input without faces is refused as every other command refuses it, not written empty under a warning
+// that "every triangle collapsed".
+TEST(Cli, ClusterRefusesAnInputWithoutFaces) {
+  test::TempDir dir;
+  const std::string points = dir / "points.obj";
+  std::ofstream(points) << "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+  const std::string result = dir / "out.ply";
+  for (const std::string mode : {"--grid 8", "--octree --faces 10"}) {
+    const CommandResult r = run("cluster -q " + mode + " " + points + " -o " + result, dir);
+    EXPECT_EQ(r.exit_code, 2) << mode;
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_NE(r.err.find("points.obj: the mesh has no faces"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(result)) << mode;
+  }
+}
+
 TEST(Cli, FailedConvertLeavesNothingBehind) {
   test::TempDir dir;
   const std::string bad = dir / "truncated.ply";

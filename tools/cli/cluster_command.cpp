@@ -85,6 +85,9 @@ void add_cluster_command(CLI::App& app) {
     const double open_seconds = seconds_since(start);
     ClusterStats stats;
     const QuadricMesh result = cluster(*stream, options, &stats);
+    // As every other command says of it when reading: an empty output would read as "every triangle
+    // collapsed".
+    if (stats.input_triangles == 0) throw Error(flags->input, {}, "the mesh has no faces");
     const std::uint64_t input_bytes = stream->bytes_total();
     stream.reset();  // its vertex array is scratch now; free it before writing
     const auto write_start = std::chrono::steady_clock::now();

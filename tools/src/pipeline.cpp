@@ -164,6 +164,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.progress = options.progress;
   start = Clock::now();
   stage.mesh = cluster(*stream, cluster_options, &stage.cluster);
+  // The in-memory path's reader refuses such a file; the streaming one only knows once the pass is done.
+  if (stage.cluster.input_triangles == 0) throw Error(stream->path(), {}, "the mesh has no faces");
   stream.reset();
   stage.clustered = true;
   stage.input_faces = stage.cluster.input_triangles;
