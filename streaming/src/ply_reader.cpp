@@ -106,12 +106,35 @@ std::optional<std::int64_t> exact_integer(double value) {
   return integer;
 }
 
+// 8-bit integer colors are the byte itself (a signed "char" too: writers use it for 0..255 as well); wider
+// integers span their type's positive range (a 16-bit 32768 is mid-grey, 128), as floating-point colors span
+// [0, 1].
 std::uint8_t color_channel(double value, PlyType type) {
-  if (ply_type_is_integer(type)) return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
-  // Floating-point colors are in [0, 1].
-  if (!(value > 0.0)) return 0;
-  if (value >= 1.0) return 255;
-  return static_cast<std::uint8_t>(std::lround(value * 255.0));
+  double full = 1.0;
+  switch (type) {
+    case PlyType::int8:
+    case PlyType::uint8:
+      return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
+    case PlyType::int16:
+      full = 32767.0;
+      break;
+    case PlyType::uint16:
+      full = 65535.0;
+      break;
+    case PlyType::int32:
+      full = 2147483647.0;
+      break;
+    case PlyType::uint32:
+      full = 4294967295.0;
+      break;
+    case PlyType::float32:
+    case PlyType::float64:
+      break;
+  }
+  const double unit = value / full;
+  if (!(unit > 0.0)) return 0;
+  if (unit >= 1.0) return 255;
+  return static_cast<std::uint8_t>(std::lround(unit * 255.0));
 }
 
 // Grows lo/hi (3 floats each) over n packed x y z triples. Returns the index of the first point with a NaN or

@@ -450,6 +450,25 @@ TEST(PlyTypes, DoubleCoordinatesAreRoundedToFloat) {
   EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{{0, 1, 2}}));
 }
 
+// Integer colors wider than a byte span their type's range; they were clamped, so mid-grey came out white.
+TEST(PlyTypes, WideIntegerColorsAreScaled) {
+  test::TempDir dir;
+  const std::string header =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "property ushort red\nproperty short green\nproperty uint blue\nproperty char alpha\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  write_bytes(dir / "c.ply", header +
+                                 "0 0 0 65535 32767 0 100\n"
+                                 "1 0 0 32768 -5 2147483648 -3\n"
+                                 "0 1 0 300 16384 4294967295 127\n"
+                                 "3 0 1 2\n");
+  const IndexedMesh mesh = read_mesh(dir / "c.ply");
+  ASSERT_EQ(mesh.colors.size(), 3u);
+  EXPECT_EQ(mesh.colors[0], (Color{255, 255, 0, 100}));
+  EXPECT_EQ(mesh.colors[1], (Color{128, 0, 128, 0}));
+  EXPECT_EQ(mesh.colors[2], (Color{1, 128, 255, 127}));
+}
+
 // A big-endian file written by hand with every attribute, and unusual types for each.
 TEST(PlyTypes, BigEndianWithAttributes) {
   test::TempDir dir;
