@@ -106,32 +106,36 @@ std::optional<std::int64_t> exact_integer(double value) {
   return integer;
 }
 
-// 8-bit integer colors are the byte itself (a signed "char" too: writers use it for 0..255 as well); wider
-// integers span their type's positive range (a 16-bit 32768 is mid-grey, 128), as floating-point colors span
-// [0, 1].
-std::uint8_t color_channel(double value, PlyType type) {
-  double full = 1.0;
+// The values an integer type holds (the widest for floating-point types).
+std::pair<std::int64_t, std::int64_t> integer_range(PlyType type) {
   switch (type) {
     case PlyType::int8:
+      return {INT8_MIN, INT8_MAX};
     case PlyType::uint8:
-      return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
+      return {0, UINT8_MAX};
     case PlyType::int16:
-      full = 32767.0;
-      break;
+      return {INT16_MIN, INT16_MAX};
     case PlyType::uint16:
-      full = 65535.0;
-      break;
+      return {0, UINT16_MAX};
     case PlyType::int32:
-      full = 2147483647.0;
-      break;
+      return {INT32_MIN, INT32_MAX};
     case PlyType::uint32:
-      full = 4294967295.0;
-      break;
+      return {0, UINT32_MAX};
     case PlyType::float32:
     case PlyType::float64:
       break;
   }
-  const double unit = value / full;
+  return {INT64_MIN, INT64_MAX};
+}
+
+// 8-bit integer colors are the byte itself (a signed "char" too: writers use it for 0..255 as well); wider
+// integers span their type's positive range (a 16-bit 32768 is mid-grey, 128), as floating-point colors span
+// [0, 1].
+std::uint8_t color_channel(double value, PlyType type) {
+  if (type == PlyType::int8 || type == PlyType::uint8) {
+    return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
+  }
+  const double unit = ply_type_is_integer(type) ? value / double(integer_range(type).second) : value;
   if (!(unit > 0.0)) return 0;
   if (unit >= 1.0) return 255;
   return static_cast<std::uint8_t>(std::lround(unit * 255.0));
@@ -622,27 +626,6 @@ namespace {
 
 bool is_ascii_delimiter(char c) {
   return c == ' ' || c == '\t' || c == '\r' || c == '\n';
-}
-
-std::pair<std::int64_t, std::int64_t> integer_range(PlyType type) {
-  switch (type) {
-    case PlyType::int8:
-      return {INT8_MIN, INT8_MAX};
-    case PlyType::uint8:
-      return {0, UINT8_MAX};
-    case PlyType::int16:
-      return {INT16_MIN, INT16_MAX};
-    case PlyType::uint16:
-      return {0, UINT16_MAX};
-    case PlyType::int32:
-      return {INT32_MIN, INT32_MAX};
-    case PlyType::uint32:
-      return {0, UINT32_MAX};
-    case PlyType::float32:
-    case PlyType::float64:
-      break;
-  }
-  return {INT64_MIN, INT64_MAX};
 }
 
 }  // namespace
