@@ -928,21 +928,6 @@ struct Decimator {
 
   // ---------------------------------------------------------------- adjacency
 
-  // The ids of the live faces around head vertex v, read only: the region loops of the first phase may be
-  // packing other vertices' lists meanwhile.
-  template <class Body>
-  void for_live_faces(Index v, const Body& body) const {
-    Index seg = v;
-    do {
-      const Vertex& s = verts[seg];
-      const Index* list = vf.data() + s.seg_start;
-      for (Index i = 0; i < s.seg_count; ++i) {
-        if (face_alive(list[i])) body(list[i]);
-      }
-      seg = s.seg_next;
-    } while (seg != v);
-  }
-
   // The live faces around head vertex v. They are packed into as few of its segments as hold them (in
   // circle order, v's own first) and the emptied segments are unlinked: a vertex that absorbed many others
   // would otherwise keep a few live faces in each of their segments, and every gather would visit all of
@@ -966,11 +951,21 @@ struct Decimator {
       out.resize(kept);
       return;
     }
+    // Several segments: the live faces out first, in circle order.
     out.clear();
-    for_live_faces(v, [&](Index f) { out.push_back(f); });
+    Index seg = v;
+    do {
+      const Vertex& s = verts[seg];
+      const Index* list = vf.data() + s.seg_start;
+      for (Index i = 0; i < s.seg_count; ++i) {
+        if (face_alive(list[i])) out.push_back(list[i]);
+      }
+      seg = s.seg_next;
+    } while (seg != v);
+    // Then back into the segments, from the head on.
     std::size_t written = 0;
     Index prev = v;
-    Index seg = v;
+    seg = v;
     do {
       Vertex& s = verts[seg];
       const Index next = s.seg_next;
