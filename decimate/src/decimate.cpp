@@ -1037,15 +1037,17 @@ struct Decimator {
       }
     }
     if (kf == 2) {
-      small_sort(scratch_ids.data(), scratch_ids.data() + scratch_ids.size());
-      bool b_boundary = false;
-      for (std::size_t i = 0; i < scratch_ids.size();) {
-        std::size_t j = i;
-        while (j < scratch_ids.size() && scratch_ids[j] == scratch_ids[i]) ++j;
-        if (j - i == 1) b_boundary = true;
-        i = j;
+      // b's boundary only matters when a is on one: sorting the neighbours of a vertex of thousands of faces
+      // took three quarters of a 10,000-segment cylinder's decimation with --preserve-topology.
+      if (a_boundary) {
+        small_sort(scratch_ids.data(), scratch_ids.data() + scratch_ids.size());
+        for (std::size_t i = 0; i < scratch_ids.size();) {
+          std::size_t j = i;
+          while (j < scratch_ids.size() && scratch_ids[j] == scratch_ids[i]) ++j;
+          if (j - i == 1) return false;  // b is on a boundary too
+          i = j;
+        }
       }
-      if (a_boundary && b_boundary) return false;
       const Index c = opposite[0], d = opposite[1];
       auto has_face = [&](const std::vector<Index>& list, Index v) {
         for (Index f : list) {
