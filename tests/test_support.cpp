@@ -55,6 +55,16 @@ IndexedMesh sphere(int subdivisions, float radius) {
   return mesh;
 }
 
+IndexedMesh triangle_soup(const IndexedMesh& mesh) {
+  IndexedMesh soup;
+  for (const Triangle& t : mesh.triangles) {
+    const Index first = static_cast<Index>(soup.positions.size());
+    for (Index v : t) soup.positions.push_back(mesh.positions[v]);
+    soup.triangles.push_back({first, first + 1, first + 2});
+  }
+  return soup;
+}
+
 IndexedMesh cube(int n) {
   IndexedMesh mesh;
   std::map<std::array<int, 3>, Index> index_of;  // integer lattice point -> vertex, so faces share edges

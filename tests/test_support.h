@@ -63,5 +63,7 @@ std::string file_bytes(const std::string& path);
 IndexedMesh sphere(int subdivisions, float radius = 1.0f);
 // A closed, outward-facing axis-aligned cube [0,1]^3 with each face a grid of n x n quads.
 IndexedMesh cube(int n);
+// The same faces with every one its own three vertices, as some exporters write a mesh.
+IndexedMesh triangle_soup(const IndexedMesh& mesh);
 
 }  // namespace ocsimp::test

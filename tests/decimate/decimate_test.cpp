@@ -555,12 +555,7 @@ TEST(Decimate, HandlesNonManifoldComponentsDegeneratesAndDuplicates) {
 TEST(Decimate, WeldJoinsDuplicatedVertices) {
   // The sphere as a triangle soup: every face has its own three vertices.
   const IndexedMesh sphere = test::sphere(4);
-  IndexedMesh soup;
-  for (const Triangle& t : sphere.triangles) {
-    const Index base = static_cast<Index>(soup.positions.size());
-    for (Index v : t) soup.positions.push_back(sphere.positions[v]);
-    soup.triangles.push_back({base, base + 1, base + 2});
-  }
+  const IndexedMesh soup = test::triangle_soup(sphere);
   DecimateOptions o = faces(400);
   o.weld = true;
   const DecimateResult welded = run(soup, o);

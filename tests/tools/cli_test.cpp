@@ -366,6 +366,35 @@ TEST(Cli, SimplifyReportHasTheDocumentedFields) {
   for (const char* field : fields) EXPECT_NE(help.out.find(field), std::string::npos) << field;
 }
 
+TEST(Cli, SimplifyAndLodWeldATriangleSoupOnRequest) {
+  // A sphere whose every triangle has its own three vertices, as some exporters write it. Without --weld its
+  // faces share no edge and are decimated as separate triangles (90 % of them deleted); welded, it is one
+  // closed surface again.
+  test::TempDir dir;
+  const IndexedMesh sphere = test::sphere(4);
+  const std::string input = dir / "soup.ply";
+  write_mesh(input, test::triangle_soup(sphere));
+  const std::uint64_t target = sphere.face_count() / 10;
+  for (const std::string command : {"simplify", "lod"}) {  // lod: one level, so a plain output name
+    for (bool weld : {false, true}) {
+      const std::string output = dir / (command + (weld ? "_welded.ply" : "_soup.ply"));
+      const CommandResult r = run(command + " -q " + input + " -o " + output + " --faces " +
+                                      std::to_string(target) + (weld ? " --weld" : ""),
+                                  dir);
+      ASSERT_EQ(r.exit_code, 0) << r.err;
+      const IndexedMesh out = read_mesh(output);
+      EXPECT_EQ(out.face_count(), target) << command;
+      const MeshTopology t = analyze_topology(out);
+      if (weld) {
+        EXPECT_EQ(t.components, 1u) << command;
+        EXPECT_EQ(t.boundary_edges, 0u) << command;
+      } else {
+        EXPECT_EQ(t.components, target) << command;
+      }
+    }
+  }
+}
+
 // Starts `ocsimp args...` with TMPDIR set, kills it with `signal` after `delay`, and says whether the signal
 // is what ended it (it was still running).
 bool killed_mid_run(const std::vector<std::string>& args, const std::string& tmpdir, int signal,

@@ -81,6 +81,10 @@ void add_lod_command(CLI::App& app) {
                 "decimated directly unless --intermediate is given)");
   cmd->add_option("--intermediate", o.intermediate,
                   "Intermediate faces as a multiple of the largest level (default: from the memory budget)");
+  cmd->add_flag(
+      "--weld", o.decimate.weld,
+      "Merge vertices at exactly equal positions before decimating (a triangle soup, as some exporters "
+      "write, otherwise decimates as separate triangles)");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());

@@ -63,6 +63,10 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option(
       "--intermediate", o.intermediate,
       "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8)");
+  cmd->add_flag(
+      "--weld", o.decimate.weld,
+      "Merge vertices at exactly equal positions before decimating (a triangle soup, as some exporters "
+      "write, otherwise decimates as separate triangles)");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());
