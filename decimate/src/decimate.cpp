@@ -1039,18 +1039,20 @@ struct Decimator {
       }
     }
     if (kf == 2 && opposite[0] == opposite[1]) return false;
+    // b's neighbours, with repeats, are kept only for the boundary test below.
+    const bool b_boundary_matters = kf == 2 && a_boundary;
     scratch_ids.clear();
     for (Index f : fb) {
       for (Index x : faces[f].v) {
         if (x == b) continue;
-        scratch_ids.push_back(x);
+        if (b_boundary_matters) scratch_ids.push_back(x);
         if (x != a && verts[x].stamp == s && x != opposite[0] && x != opposite[1]) return false;
       }
     }
     if (kf == 2) {
       // b's boundary only matters when a is on one: sorting the neighbours of a vertex of thousands of faces
       // took three quarters of a 10,000-segment cylinder's decimation with --preserve-topology.
-      if (a_boundary) {
+      if (b_boundary_matters) {
         small_sort(scratch_ids.data(), scratch_ids.data() + scratch_ids.size());
         for (std::size_t i = 0; i < scratch_ids.size();) {
           std::size_t j = i;
