@@ -1514,7 +1514,7 @@ struct Decimator {
     }
     const std::uint64_t kf = dying.size();
     const std::uint64_t orphans = orphans_of_dying(a, b);
-    const bool pair_orphaned = fa.size() + fb.size() == 2 * kf;
+    const bool pair_orphaned = fa.size() + fb.size() == 2 * kf;  // the pair itself loses every face
     if (!fits_targets(kf, 1 + orphans + (pair_orphaned ? 1 : 0), overshoot)) {
       heap.remove(e, kDeferred);
       deferred.push_back(e);
