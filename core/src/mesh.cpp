@@ -1,6 +1,7 @@
 #include "ocsimp/core/mesh.h"
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 
 namespace ocsimp {
@@ -9,6 +10,12 @@ Box3 IndexedMesh::bounds() const {
   Box3 box;
   for (const Vec3f& p : positions) box.add(p);
   return box;
+}
+
+Vec3d far_origin(const Vec3d& first) {
+  const double largest = first.cwiseAbs().maxCoeff();
+  // Past float's range the readers refuse the vertex; an origin there would hide it.
+  return largest > kFarFromOrigin && largest <= std::numeric_limits<float>::max() ? first : Vec3d::Zero();
 }
 
 std::vector<Quadric> face_quadrics_per_vertex(const IndexedMesh& mesh) {

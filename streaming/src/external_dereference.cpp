@@ -311,6 +311,7 @@ class DereferencedStream final : public TriangleStream {
     inner_ = format == FileFormat::ply ? detail::open_ply_stream(path, inner_options)
                                        : detail::open_obj_stream(path, inner_options);
     bounds_ = inner_->bounds();
+    vertices_.origin = inner_->vertices().origin;  // the spooled positions and corners are relative to it
     vertex_count_ = spool_.count();
     bytes_total_ = inner_->bytes_total();
     if (!spool_.spilled()) {

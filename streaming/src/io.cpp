@@ -153,11 +153,13 @@ IndexedMesh read_mesh(TriangleStream& source) {
     // shortest face record of any format), and grow past it only as the data proves itself.
     std::vector<Triangle> triangles;
     triangles.reserve(std::min<std::uint64_t>(stream->triangles_hint(), stream->bytes_total() / 8));
-    while (stream->next(batch)) triangles.insert(triangles.end(), batch.triangles.begin(), batch.triangles.end());
+    while (stream->next(batch))
+      triangles.insert(triangles.end(), batch.triangles.begin(), batch.triangles.end());
     // The stream is exhausted, so its vertex array can be taken rather than copied.
     mesh = std::move(stream->scratch_vertices());
     mesh.triangles = std::move(triangles);
   } else {
+    mesh.origin = stream->vertices().origin;  // a soup's corners are relative to it too
     std::unordered_map<PositionKey, Index, PositionKeyHash> index_of;
     while (stream->next(batch)) {
       for (const auto& corners : batch.corners) {
@@ -182,8 +184,19 @@ IndexedMesh read_mesh(TriangleStream& source) {
   return mesh;
 }
 
+bool holds_origin(FileFormat format) {
+  return format == FileFormat::ply || format == FileFormat::obj;
+}
+
 void write_mesh(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
   const FileFormat format = options.format ? *options.format : format_from_extension(path);
+  if (!holds_origin(format) && mesh.origin != Vec3d::Zero()) {
+    // STL and Draco hold float coordinates only: they get the nearest floats to the true positions.
+    IndexedMesh placed = mesh;
+    for (Vec3f& p : placed.positions) p = nearest_float(mesh.origin + p.cast<double>());
+    placed.origin = Vec3d::Zero();
+    return write_mesh(path, placed, options);
+  }
   switch (format) {
     case FileFormat::ply:
       return detail::write_ply(path, mesh, options);

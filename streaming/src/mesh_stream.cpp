@@ -15,6 +15,7 @@ class MeshStream final : public TriangleStream {
     bounds_ = mesh.bounds();
     if (as_soup_) {
       soup_positions_ = std::move(mesh.positions);
+      vertices_.origin = mesh.origin;
     } else {
       vertices_ = std::move(mesh);
     }

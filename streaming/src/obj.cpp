@@ -199,12 +199,13 @@ class ObjStream final : public TriangleStream {
     total_ = seen_;
   }
 
-  // Up to `max` numbers into `values`; returns how many there were.
-  int parse_numbers(const char* p, const char* end, float* values, int max) {
+  // Up to `max` numbers into `values` (float or double); returns how many there were.
+  template <class Number>
+  int parse_numbers(const char* p, const char* end, Number* values, int max) {
     int count = 0;
     while (true) {
-      float value;
-      const NumberStatus status = parse_float(p, end, value);
+      Number value;
+      const NumberStatus status = parse_number(p, end, value);
       if (status == NumberStatus::missing) return count;
       if (status != NumberStatus::ok) fail(describe(status, p, end));
       if (count == max) fail("too many numbers: " + quote_token(p, end) + " after " + std::to_string(max));
@@ -214,11 +215,29 @@ class ObjStream final : public TriangleStream {
 
   void parse_vertex(const char* p, const char* end) {
     float values[7];
-    const int count = parse_numbers(p, end, values, 7);
+    // Far from zero, x y z are read as doubles and taken relative to the origin (the first vertex) before
+    // they are narrowed; near zero they are rounded straight to float, once (see far_origin).
+    double precise[7];
+    const bool first = seen_.v == 0;
+    const bool wide = first || vertices_.origin != Vec3d::Zero();
+    const int count = wide ? parse_numbers(p, end, precise, 7) : parse_numbers(p, end, values, 7);
     if (count != 3 && count != 4 && count != 6 && count != 7)
       fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
            " numbers)");
     if (seen_.v >= kNone) fail("more than 2^32-2 vertices");
+    if (first) vertices_.origin = far_origin(Vec3d(precise[0], precise[1], precise[2]));
+    if (wide && vertices_.origin == Vec3d::Zero()) {
+      parse_numbers(p, end, values, 7);  // the first vertex, near zero: as every other will be read
+    } else if (wide) {
+      for (int k = 0; k < count; ++k) values[k] = static_cast<float>(precise[k]);
+      for (int k = 0; k < 3; ++k) {
+        values[k] = static_cast<float>(precise[k] - vertices_.origin[k]);
+        if (!std::isfinite(values[k]))
+          fail(
+              "a coordinate lies beyond the float range (+-3.4e38) from the first vertex, which positions "
+              "are held relative to");
+      }
+    }
     const Vec3f position(values[0], values[1], values[2]);
     bounds_.add(position);
     if (vertex_sink_) {
@@ -422,13 +441,15 @@ void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOpti
   file.write("# ocsimp: " + std::to_string(mesh.positions.size()) + " vertices, " +
              std::to_string(mesh.triangles.size()) + " triangles\n");
   const bool colors = mesh.has_colors(), uvs = mesh.has_uvs(), normals = mesh.has_normals();
+  const bool shifted = mesh.origin != Vec3d::Zero();
   for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
-    char* const start = file.reserve(128);
+    char* const start = file.reserve(128);  // "v", 3 doubles and 3 floats with their separators, "\n"
     char* p = start;
     *p++ = 'v';
     for (int k = 0; k < 3; ++k) {
       *p++ = ' ';
-      p = print_float(p, mesh.positions[i][k]);
+      p = shifted ? print_double(p, mesh.origin[k] + double(mesh.positions[i][k]))
+                  : print_float(p, mesh.positions[i][k]);
     }
     if (colors) {
       // OBJ's color extension has no alpha.

@@ -190,7 +190,7 @@ std::size_t scan_points(const float* xyz, std::size_t n, float* lo, float* hi) {
 enum class Slot : std::uint8_t { none, x, y, z, nx, ny, nz, red, green, blue, alpha, u, v };
 
 struct VertexValues {
-  float position[3] = {0, 0, 0};
+  double position[3] = {0, 0, 0};  // as read: made relative to the origin before narrowing to float
   float normal[3] = {0, 0, 0};
   Color color = {0, 0, 0, 255};
   float uv[2] = {0, 0};
@@ -203,7 +203,7 @@ void set_value(VertexValues& values, Slot slot, PlyType type, double value) {
     case Slot::x:
     case Slot::y:
     case Slot::z:
-      values.position[int(slot) - int(Slot::x)] = to_float(value);
+      values.position[int(slot) - int(Slot::x)] = value;
       break;
     case Slot::nx:
     case Slot::ny:
@@ -361,6 +361,8 @@ class PlyStream final : public TriangleStream {
   detail::ByteReader reader_;
   ProgressFn progress_;
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;  // out of core: vertices go there, not kept
+  // x, y or z is a double or a 32-bit integer, more precise than a float far from zero (see far_origin).
+  bool precise_positions_ = false;
   std::size_t capacity_;
   PlyHeader header_;
   bool ascii_ = false;
@@ -460,6 +462,14 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
                 "element vertex " + std::to_string(vertex_count_) + " is more than 2^32-1 vertices");
   }
   vertex_plan_ = plan_vertices(path, vertex_element);
+  for (std::size_t i = 0; i < vertex_plan_.slots.size(); ++i) {
+    const Slot slot = vertex_plan_.slots[i];
+    const PlyType type = vertex_element.properties[i].type;
+    if ((slot == Slot::x || slot == Slot::y || slot == Slot::z) &&
+        (type == PlyType::float64 || type == PlyType::int32 || type == PlyType::uint32)) {
+      precise_positions_ = true;
+    }
+  }
 
   auto face = find_element("face");
   if (!face) {
@@ -837,7 +847,10 @@ void PlyStream::load_vertices() {
 }
 
 void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset) {
-  const Vec3f position(values.position[0], values.position[1], values.position[2]);
+  const Vec3d read(values.position[0], values.position[1], values.position[2]);
+  if (index == 0 && precise_positions_) vertices_.origin = far_origin(read);
+  const Vec3d local = read - vertices_.origin;
+  const Vec3f position(to_float(local.x()), to_float(local.y()), to_float(local.z()));
   if (!position.allFinite()) {
     const std::string reason =
         "vertex " + std::to_string(index) + " has a coordinate that is not a finite float";

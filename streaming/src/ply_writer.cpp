@@ -1,9 +1,9 @@
 // PLY output: PlyStreamWriter emits records as they come; write_ply() feeds it a whole mesh.
 //
-// The header is fixed by the layout (float positions, float normals, uchar RGBA colors, float u v, faces as
-// `property list uchar int vertex_indices`, or uint indices past 2^31-1 vertices) and holds nothing variable,
-// so identical meshes give identical files. Ascii floats use std::to_chars' shortest form, which reads back
-// to the same float.
+// The header is fixed by the layout (float positions, or double ones for a mesh with an origin; float
+// normals, uchar RGBA colors, float u v, faces as `property list uchar int vertex_indices`, or uint indices
+// past 2^31-1 vertices) and holds nothing variable, so identical meshes give identical files. Ascii numbers
+// use std::to_chars' shortest form, which reads back to the same value.
 
 #include "ocsimp/streaming/ply_writer.h"
 
@@ -21,7 +21,8 @@
 namespace ocsimp {
 namespace {
 
-// Room for the longest ascii vertex: 8 floats of at most 15 characters, 4 bytes of 3 digits, separators.
+// Room for the longest ascii vertex: 3 doubles of at most 24 characters, 5 floats of at most 15, 4 bytes of 3
+// digits, separators.
 constexpr std::size_t kMaxAsciiRecord = 256;
 
 template <class T>
@@ -31,6 +32,11 @@ char* put_le(char* out, T value) {
     std::memcpy(&bits, &value, 4);
     bits = __builtin_bswap32(bits);
     std::memcpy(out, &bits, 4);
+  } else if constexpr (std::endian::native == std::endian::big && sizeof(T) == 8) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &value, 8);
+    bits = __builtin_bswap64(bits);
+    std::memcpy(out, &bits, 8);
   } else {
     std::memcpy(out, &value, sizeof(T));
   }
@@ -41,6 +47,11 @@ char* put_text(char* out, float value) {
   // Shortest form that reads back to the same float: at most 9 significant digits, so 15 characters
   // ("-1.17549435e-38").
   return std::to_chars(out, out + 16, value).ptr;
+}
+
+char* put_text(char* out, double value) {
+  // At most 17 significant digits: 24 characters ("-1.7976931348623157e+308").
+  return std::to_chars(out, out + 25, value).ptr;
 }
 
 char* put_text(char* out, std::uint32_t value) {
@@ -56,7 +67,8 @@ std::string make_header(const PlyLayout& layout) {
   header += layout.ascii ? "format ascii 1.0\n" : "format binary_little_endian 1.0\n";
   header += "comment written by ocsimp\n";
   header += "element vertex " + std::to_string(layout.vertices) + "\n";
-  header += "property float x\nproperty float y\nproperty float z\n";
+  header += layout.origin == Vec3d::Zero() ? "property float x\nproperty float y\nproperty float z\n"
+                                           : "property double x\nproperty double y\nproperty double z\n";
   if (layout.normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
   if (layout.colors) {
     header += "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n";
@@ -104,9 +116,10 @@ void PlyStreamWriter::add_vertices(const Vec3f* positions, const Vec3f* normals,
     throw Error(file_->path(), {},
                 "vertex " + std::to_string(vertices_written_) + " lacks an attribute of the layout");
   }
-  const std::size_t record =
-      layout_.ascii ? kMaxAsciiRecord
-                    : 12 + (layout_.normals ? 12 : 0) + (layout_.colors ? 4 : 0) + (layout_.uvs ? 8 : 0);
+  const bool shifted = layout_.origin != Vec3d::Zero();
+  const std::size_t record = layout_.ascii ? kMaxAsciiRecord
+                                           : (shifted ? 24 : 12) + (layout_.normals ? 12 : 0) +
+                                                 (layout_.colors ? 4 : 0) + (layout_.uvs ? 8 : 0);
   const std::size_t block = AtomicFile::buffer_capacity / record;
   for (std::size_t first = 0; first < count; first += block) {
     const std::size_t end = std::min(count, first + block);
@@ -124,7 +137,14 @@ void PlyStreamWriter::add_vertices(const Vec3f* positions, const Vec3f* normals,
             *out++ = ' ';
           }
         };
-        floats(position.data(), 3);
+        if (shifted) {
+          for (int k = 0; k < 3; ++k) {
+            out = put_text(out, layout_.origin[k] + double(position[k]));
+            *out++ = ' ';
+          }
+        } else {
+          floats(position.data(), 3);
+        }
         if (layout_.normals) floats(normals[i].data(), 3);
         if (layout_.colors) {
           for (std::uint8_t channel : colors[i]) {
@@ -135,7 +155,11 @@ void PlyStreamWriter::add_vertices(const Vec3f* positions, const Vec3f* normals,
         if (layout_.uvs) floats(uvs[i].data(), 2);
         out[-1] = '\n';  // over the last separator
       } else {
-        for (int k = 0; k < 3; ++k) out = put_le(out, position[k]);
+        if (shifted) {
+          for (int k = 0; k < 3; ++k) out = put_le(out, layout_.origin[k] + double(position[k]));
+        } else {
+          for (int k = 0; k < 3; ++k) out = put_le(out, position[k]);
+        }
         if (layout_.normals) {
           for (int k = 0; k < 3; ++k) out = put_le(out, normals[i][k]);
         }
@@ -235,6 +259,7 @@ void write_ply(const std::string& path, const IndexedMesh& mesh, const WriteOpti
   layout.colors = check(mesh.colors.size(), "colors");
   layout.uvs = check(mesh.uvs.size(), "uvs");
   layout.ascii = options.ascii;
+  layout.origin = mesh.origin;
 
   PlyStreamWriter writer(path, layout);
   writer.add_vertices(mesh.positions.data(), layout.normals ? mesh.normals.data() : nullptr,

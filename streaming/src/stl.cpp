@@ -214,7 +214,7 @@ class AsciiStlParser {
   void add_vertex(const char* p, const char* end) {
     float xyz[3];
     for (float& value : xyz) {
-      const NumberStatus status = parse_float(p, end, value);
+      const NumberStatus status = parse_number(p, end, value);
       if (status != NumberStatus::ok) fail("vertex: " + describe(status, p, end));
     }
     if (skip_blanks(p, end) != end) fail("vertex: unexpected " + quote_token(p, end) + " after x y z");

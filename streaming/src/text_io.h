@@ -11,6 +11,7 @@
 #include <cstring>
 #include <string>
 #include <string_view>
+#include <type_traits>
 
 #include "byte_reader.h"
 #include "ocsimp/core/error.h"
@@ -91,9 +92,12 @@ inline std::string quote_token(const char* p, const char* end) {
 
 enum class NumberStatus { ok, missing, malformed, not_finite, beyond_float };
 
-// Parses one finite float token starting at p (after blanks); on success advances p past it. The token must
-// end at a blank or at `end`: "1.5x" is malformed, not 1.5. Decimal text is rounded once, straight to float.
-inline NumberStatus parse_float(const char*& p, const char* end, float& value) {
+// Parses one finite number token (Number: float or double) starting at p (after blanks); on success advances
+// p past it. The token must end at a blank or at `end`: "1.5x" is malformed, not 1.5. Decimal text is rounded
+// once, straight to Number.
+template <class Number>
+inline NumberStatus parse_number(const char*& p, const char* end, Number& value) {
+  static_assert(std::is_same_v<Number, float> || std::is_same_v<Number, double>);
   const char* start = skip_blanks(p, end);
   if (start == end) return NumberStatus::missing;
   const char* digits = (*start == '+' && start + 1 < end && start[1] != '-') ? start + 1 : start;
@@ -101,6 +105,7 @@ inline NumberStatus parse_float(const char*& p, const char* end, float& value) {
   if (result.ec != std::errc() || (result.ptr < end && !is_blank(*result.ptr)))
     return NumberStatus::malformed;
   if (!std::isfinite(value)) {
+    if constexpr (std::is_same_v<Number, double>) return NumberStatus::not_finite;
     // A finite number too large for a float (1e39) is told apart from a written NaN or infinity.
     double wide = 0;
     fast_float::from_chars(digits, end, wide);
@@ -130,6 +135,12 @@ inline std::string describe(NumberStatus status, const char* p, const char* end)
 inline char* print_float(char* out, float value) {
   if (value == 0.0f) value = 0.0f;  // no "-0"
   return std::to_chars(out, out + 16, value).ptr;
+}
+
+// The same for a double: at most 24 characters.
+inline char* print_double(char* out, double value) {
+  if (value == 0.0) value = 0.0;
+  return std::to_chars(out, out + 25, value).ptr;
 }
 
 // Writers refuse meshes they would write wrongly: faces pointing past the vertices, attribute arrays of the

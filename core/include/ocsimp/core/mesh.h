@@ -11,7 +11,14 @@
 namespace ocsimp {
 
 // Attribute arrays are either empty or hold exactly one entry per position.
+//
+// Positions are 32-bit floats relative to `origin`: vertex i lies at origin + positions[i], summed in double.
+// Float spacing grows with distance from zero (about 0.008 at 10^5, 0.5 at 10^7), so a scan stored in
+// georeferenced double coordinates would lose its detail to rounding if held in floats as it stands: the
+// readers take such a file relative to its first vertex instead (see far_origin), every stage keeps that
+// origin, and the writers add it back. Everywhere else the origin is zero.
 struct IndexedMesh {
+  Vec3d origin = Vec3d::Zero();
   std::vector<Vec3f> positions;
   std::vector<Triangle> triangles;
   std::vector<Vec3f> normals;
@@ -25,6 +32,16 @@ struct IndexedMesh {
   bool has_uvs() const { return !uvs.empty(); }
   Box3 bounds() const;
 };
+
+// Past this distance from zero on some axis, float spacing exceeds 2^-14 (6e-5): a reader of coordinates held
+// more precisely than floats (double or 32-bit integer PLY properties, OBJ text) takes such a mesh relative
+// to its first vertex.
+inline constexpr double kFarFromOrigin = 1024.0;
+
+// The origin a reader of precise coordinates uses for a mesh whose first vertex is `first`: `first` itself
+// when it lies past kFarFromOrigin on some axis (and within float range), otherwise zero (so meshes near zero
+// read exactly as floats).
+Vec3d far_origin(const Vec3d& first);
 
 // A mesh whose vertices carry quadrics. `quadrics` is empty (the decimator then builds area-weighted plane
 // quadrics from the faces) or holds one quadric per vertex, summed over the *original* surface, so that costs

@@ -56,6 +56,11 @@ struct WriteOptions {
   ProgressFn progress;               // faces written ("write" phase)
 };
 
+// Whether the format keeps coordinates far from zero at their precision (PLY writes double coordinates for
+// a mesh with an origin, OBJ writes them as decimal text); STL and Draco hold floats, so a mesh with an
+// origin is written to them at float precision around zero (see IndexedMesh::origin).
+bool holds_origin(FileFormat format);
+
 // Writes atomically: to a temporary name beside `path`, renamed over it only when complete.
 void write_mesh(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options = {});
 

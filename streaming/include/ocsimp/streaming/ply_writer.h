@@ -20,6 +20,9 @@ struct PlyLayout {
   bool colors = false;      // red green blue alpha uchar
   bool uvs = false;         // u v float
   bool ascii = false;       // default binary_little_endian
+  // Positions are offsets from this point (IndexedMesh::origin). Unless it is zero, x y z are written as
+  // doubles, origin + offset, so the file keeps the precision the coordinates were read with.
+  Vec3d origin = Vec3d::Zero();
 };
 
 // Declares the counts up front (PLY's header needs them), then takes exactly that many vertices followed by
