@@ -290,7 +290,9 @@ QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options, Clust
                                : static_cast<unsigned>(std::max(1, tbb::info::default_concurrency()));
   ClusterStats local;
   tbb::task_arena arena(static_cast<int>(threads));
+  const Vec3d origin = stream.vertices().origin;  // the stream's positions and corners are relative to it
   QuadricMesh result = arena.execute([&] { return cluster_detail::run(stream, options, threads, local); });
+  result.mesh.origin = origin;
   local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   local.peak_rss_bytes = peak_rss_bytes();
   if (stats) *stats = local;

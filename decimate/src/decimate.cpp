@@ -2333,6 +2333,7 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   d.explain();
   DecimateResult result;
   result.mesh = d.output(options.output_quadrics ? &result.quadrics : nullptr);
+  result.mesh.origin = input.mesh.origin;  // build() took the arrays, not the frame they are in
   result.stats = d.stats;
   return result;
 }

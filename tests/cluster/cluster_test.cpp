@@ -139,6 +139,21 @@ TEST(Cluster, TessellatedPlaneClustersOntoThePlane) {
   }
 }
 
+// A stream read far from zero (IndexedMesh::origin) is clustered in its offsets, as it would be at zero, and
+// the output keeps the origin, from indexed and soup streams alike.
+TEST(Cluster, KeepsTheFrameOfAMeshFarFromZero) {
+  IndexedMesh far = test::sphere(4);
+  far.origin = Vec3d(652'113.25, 4'210'775.5, 312.125);
+  IndexedMesh at_zero = far;
+  at_zero.origin = Vec3d::Zero();
+  for (bool soup : {false, true}) {
+    const QuadricMesh out = run(far, grid_options(8), nullptr, soup);
+    EXPECT_EQ(out.mesh.origin, far.origin) << (soup ? "soup" : "indexed");
+    EXPECT_GT(out.mesh.face_count(), 50u);
+    EXPECT_EQ(out.mesh.positions, run(at_zero, grid_options(8), nullptr, soup).mesh.positions);
+  }
+}
+
 TEST(Cluster, SphereRepresentativesLieOnTheSphere) {
   const IndexedMesh sphere = test::sphere(6);  // 32768 triangles
   ClusterStats stats;

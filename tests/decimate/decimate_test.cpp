@@ -185,6 +185,19 @@ TEST(Decimate, ExactFaceCountsOnClosedSphere) {
   }
 }
 
+// A mesh read far from zero (IndexedMesh::origin) is decimated in its offsets, as it would be at zero, and
+// keeps its origin.
+TEST(Decimate, KeepsTheFrameOfAMeshFarFromZero) {
+  IndexedMesh far = test::sphere(4);
+  far.origin = Vec3d(652'113.25, 4'210'775.5, 312.125);
+  const DecimateResult r = run(far, faces(500));
+  EXPECT_EQ(r.mesh.origin, far.origin);
+  EXPECT_EQ(r.mesh.face_count(), 500u);
+  IndexedMesh at_zero = far;
+  at_zero.origin = Vec3d::Zero();
+  EXPECT_EQ(run(at_zero, faces(500)).mesh.positions, r.mesh.positions);
+}
+
 TEST(Decimate, ExactVertexCounts) {
   const IndexedMesh sphere = test::sphere(4);
   for (std::uint64_t target : {1000u, 301u, 4u}) {

@@ -126,6 +126,49 @@ TEST(Cli, GenIsDeterministicAndInfoCountsIt) {
   EXPECT_EQ(j["components"].get<long>(), 1);
 }
 
+// A scan in georeferenced double coordinates (gen --offset, as UTM metres) simplifies as well as the same
+// scan at zero by every command, and comes out in double coordinates: float positions at y = 4.2e6 are 0.5
+// apart, half the scan's size, so reading it into floats as it stands made a 27 % Hausdorff distance of a
+// decimated cylinder at 1e5.
+TEST(Cli, ScanFarFromZeroSimplifiesAsWellAsAtZero) {
+  test::TempDir dir;
+  const std::string gen = "gen -q --triangles 20000 --seed 5 -o ";
+  ASSERT_EQ(run(gen + (dir / "zero.ply"), dir).exit_code, 0);
+  ASSERT_EQ(run(gen + (dir / "far.ply") + " --offset 652113.25 4210775.5 312.125", dir).exit_code, 0);
+  const CommandResult info = run("info --json " + (dir / "far.ply"), dir);
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json j = nlohmann::json::parse(info.out);
+  EXPECT_GT(j["bounding_box"]["min"][1].get<double>(), 4.2e6);
+  EXPECT_LT(j["diagonal"].get<double>(), 10.0);
+
+  auto rms = [&](const std::string& original, const std::string& simplified) {
+    const CommandResult r =
+        run("compare --json -q --samples 20000 " + (dir / original) + " " + (dir / simplified), dir);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return r.exit_code == 0 ? nlohmann::json::parse(r.out)["rms"].get<double>() : 1e9;
+  };
+  for (const std::string command : {"decimate --ratio 0.1", "cluster --grid 24",
+                                    "simplify --faces 2000 --two-stage", "lod --faces 4000,400"}) {
+    const bool lod = command.rfind("lod", 0) == 0;
+    for (const std::string name : {"zero", "far"}) {
+      const std::string out = dir / (name + (lod ? "_{faces}.ply" : "_out.ply"));
+      const CommandResult r = run(command + " -q " + (dir / (name + ".ply")) + " -o '" + out + "'", dir);
+      ASSERT_EQ(r.exit_code, 0) << command << ": " << r.err;
+    }
+    const std::string far_out = lod ? "far_400.ply" : "far_out.ply",
+                      zero_out = lod ? "zero_400.ply" : "zero_out.ply";
+    EXPECT_NE(file_bytes(dir / far_out).find("property double x"), std::string::npos) << command;
+    const double at_zero = rms("zero.ply", zero_out), far = rms("far.ply", far_out);
+    EXPECT_GT(at_zero, 0) << command;
+    EXPECT_LT(far, 1.01 * at_zero) << command;
+  }
+  // STL holds floats only: it is written, and the loss is said.
+  const CommandResult stl =
+      run("decimate --ratio 0.1 -q " + (dir / "far.ply") + " -o " + (dir / "far.stl"), dir);
+  EXPECT_EQ(stl.exit_code, 0);
+  EXPECT_NE(stl.err.find("float coordinates only"), std::string::npos) << stl.err;
+}
+
 TEST(Cli, BadInputGivesOneLineNamingTheFileAndExit2) {
   test::TempDir dir;
   const std::string bad = dir / "bad.ply";

@@ -283,6 +283,25 @@ TEST(MeasureDistance, ShiftedPlaneIsItsShiftAway) {
   EXPECT_NEAR(d.percent(d.hausdorff), 100 * shift / std::sqrt(2.0), 1e-6);
 }
 
+// Two meshes read far from zero with different origins (IndexedMesh::origin): the same lifted plane as above,
+// its positions relative to an origin 0.25 and 0.5 away from the plane's, is still 0.05 away.
+TEST(MeasureDistance, MeshesWithDifferentOriginsMeetInOneFrame) {
+  IndexedMesh plane = test::grid_square(8);
+  plane.origin = Vec3d(652'113.25, 4'210'775.5, 312.125);
+  IndexedMesh lifted = translated(test::grid_square(3), {-0.25f, 0.5f, 0.0f});
+  lifted.origin = plane.origin + Vec3d(0.25, -0.5, 0.05);
+  CompareOptions options;
+  options.samples = 30000;
+  const SurfaceDistance d = measure_distance(plane, lifted, options);
+  for (const OneSidedDistance& side : {d.forward, d.backward}) {
+    EXPECT_NEAR(side.hausdorff, 0.05, 1e-6);
+    EXPECT_NEAR(side.rms, 0.05, 1e-6);
+    // Where it was reached, in the files' coordinates: on the plane's square.
+    const Vec3d at = side.farthest - plane.origin;
+    EXPECT_TRUE(at.x() > -1e-6 && at.x() < 1 + 1e-6 && at.y() > -1e-6 && at.y() < 1 + 1e-6) << at.transpose();
+  }
+}
+
 // A patch [0.4, 0.6]^2 in the plane of the unit square: every patch point lies on the square, while the
 // square's corners are 0.4 sqrt(2) from the patch.
 TEST(MeasureDistance, OneSidedDistancesDifferWhereTheyShould) {

@@ -180,6 +180,13 @@ nlohmann::json phases_json(const std::vector<PhaseReport>& phases) {
 
 void write_result(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
   write_mesh(path, mesh, options);
+  const FileFormat format = options.format ? *options.format : format_from_extension(path);
+  if (mesh.origin != Vec3d::Zero() && !holds_origin(format)) {
+    std::fprintf(stderr,
+                 "ocsimp: warning: %s holds float coordinates only: the input's coordinates, far from zero "
+                 "(%.17g, %.17g, %.17g), lose precision there; write PLY or OBJ to keep it\n",
+                 path.c_str(), mesh.origin.x(), mesh.origin.y(), mesh.origin.z());
+  }
   if (mesh.triangles.empty()) {
     std::fprintf(
         stderr,

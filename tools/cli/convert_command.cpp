@@ -28,7 +28,7 @@ void add_convert_command(CLI::App& app) {
     ReadOptions read;
     read.progress = make_progress(flags->quiet);
     flags->write.progress = read.progress;
-    write_mesh(flags->output, read_mesh(flags->input, read), flags->write);
+    write_result(flags->output, read_mesh(flags->input, read), flags->write);
   });
 }
 

@@ -32,6 +32,12 @@ void add_gen_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--noise", flags->options.noise, "Scanner noise, in mean edge lengths")
       ->capture_default_str();
+  cmd->add_option_function<std::vector<double>>(
+         "--offset",
+         [flags](const std::vector<double>& xyz) { flags->options.offset = Vec3d(xyz[0], xyz[1], xyz[2]); },
+         "Place the mesh around this point (X Y Z), in double coordinates, as a georeferenced scan")
+      ->expected(3)
+      ->check(CLI::Number);
   cmd->add_flag("--normals", flags->options.normals, "Write per-vertex normals");
   cmd->add_flag("--colors", flags->options.colors, "Write per-vertex colors");
   cmd->add_flag("--ascii", flags->options.ascii, "ASCII PLY instead of binary");

@@ -1,4 +1,6 @@
 // ocsimp info: counts, attributes, extent and connectivity defects of a mesh file.
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include "commands.h"
@@ -18,7 +20,9 @@ void add_info_command(CLI::App& app) {
     const FileFormat format = detect_format(*input);
     const IndexedMesh mesh = read_mesh(*input);
     const MeshTopology topo = analyze_topology(mesh);
-    const Box3 box = mesh.bounds();
+    Box3 box = mesh.bounds();  // in the file's coordinates
+    box.lo += mesh.origin;
+    box.hi += mesh.origin;
     nlohmann::json out;
     out["file"] = *input;
     out["format"] = format_name(format);
@@ -29,6 +33,9 @@ void add_info_command(CLI::App& app) {
     out["bounding_box"] = {{"min", {box.lo.x(), box.lo.y(), box.lo.z()}},
                            {"max", {box.hi.x(), box.hi.y(), box.hi.z()}}};
     out["diagonal"] = box.diagonal();
+    // Where the file's coordinates were taken from (IndexedMesh::origin): zero but for double coordinates
+    // far from zero.
+    out["origin"] = {mesh.origin.x(), mesh.origin.y(), mesh.origin.z()};
     out["edges"] = topo.edges;
     out["boundary_edges"] = topo.boundary_edges;
     out["non_manifold_edges"] = topo.non_manifold_edges;
@@ -48,8 +55,16 @@ void add_info_command(CLI::App& app) {
     std::printf("  attributes             %s%s%s%s\n", mesh.has_normals() ? "normals " : "",
                 mesh.has_colors() ? "colors " : "", mesh.has_uvs() ? "uvs " : "",
                 mesh.has_normals() || mesh.has_colors() || mesh.has_uvs() ? "" : "none");
-    std::printf("  bounding box           (%g, %g, %g) .. (%g, %g, %g)\n", box.lo.x(), box.lo.y(), box.lo.z(),
-                box.hi.x(), box.hi.y(), box.hi.z());
+    // Enough digits to tell the box's sides apart however far from zero it lies.
+    const int digits =
+        6 + std::max(0, int(std::ceil(std::log10(std::max(1.0, mesh.origin.cwiseAbs().maxCoeff())))));
+    std::printf("  bounding box           (%.*g, %.*g, %.*g) .. (%.*g, %.*g, %.*g)\n", digits, box.lo.x(),
+                digits, box.lo.y(), digits, box.lo.z(), digits, box.hi.x(), digits, box.hi.y(), digits,
+                box.hi.z());
+    if (mesh.origin != Vec3d::Zero()) {
+      std::printf("  origin                 (%.17g, %.17g, %.17g): positions are held relative to it\n",
+                  mesh.origin.x(), mesh.origin.y(), mesh.origin.z());
+    }
     std::printf("  diagonal               %g\n", box.diagonal());
     std::printf("  edges                  %zu\n", topo.edges);
     std::printf("  boundary edges         %zu\n", topo.boundary_edges);

@@ -84,10 +84,12 @@ double seconds_between(Clock::time_point start, Clock::time_point end) {
 
 // Drops vertices no face uses and renumbers the rest in order, so vertex counts are comparable between
 // methods that keep the input's vertex buffer (meshoptimizer) and those that compact (the rest).
-IndexedMesh compact(const std::vector<Vec3f>& positions, std::vector<Triangle> triangles) {
+IndexedMesh compact(const std::vector<Vec3f>& positions, std::vector<Triangle> triangles,
+                    const Vec3d& origin) {
   constexpr Index kUnused = std::numeric_limits<Index>::max();
   std::vector<Index> remap(positions.size(), kUnused);
   IndexedMesh out;
+  out.origin = origin;
   for (Triangle& t : triangles) {
     for (Index& v : t) {
       if (remap[v] == kUnused) {
@@ -115,7 +117,7 @@ TimedRun run_cluster(const IndexedMesh& mesh, BenchMethod method, std::uint64_t 
   run.seconds = seconds_between(start, Clock::now());
   run.peak = window.peak();
   stream.reset();
-  run.mesh = compact(result.mesh.positions, std::move(result.mesh.triangles));
+  run.mesh = compact(result.mesh.positions, std::move(result.mesh.triangles), result.mesh.origin);
   return run;
 }
 
@@ -179,7 +181,7 @@ TimedRun run_meshopt(const IndexedMesh& mesh, BenchMethod method, std::uint64_t 
   for (std::size_t i = 0; i < triangles.size(); ++i) {
     triangles[i] = {destination[3 * i], destination[3 * i + 1], destination[3 * i + 2]};
   }
-  run.mesh = compact(mesh.positions, std::move(triangles));
+  run.mesh = compact(mesh.positions, std::move(triangles), mesh.origin);
   return run;
 }
 #endif

@@ -41,9 +41,13 @@ struct ChunkStats {
   }
 };
 
-// Distances from `points` to `to`, each search bounded by the distance to the previous point's closest
-// point, which lies on the surface: neighbouring samples are close, so this prunes most of the BVH at once.
-ChunkStats measure_points(const DistanceIndex& to, const Vec3d* points, std::size_t count) {
+// Distances from `points` (moved by `shift` into `to`'s frame) to `to`, each search bounded by the distance
+// to the previous point's closest point, which lies on the surface: neighbouring samples are close, so this
+// prunes most of the BVH at once.
+ChunkStats measure_points(const DistanceIndex& to, Vec3d* points, std::size_t count, const Vec3d& shift) {
+  if (shift != Vec3d::Zero()) {
+    for (std::size_t i = 0; i < count; ++i) points[i] += shift;
+  }
   ChunkStats stats;
   Vec3d previous = Vec3d::Zero();
   bool have_previous = false;
@@ -78,6 +82,7 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
     throw Error(from.name(), {},
                 "nothing to measure: no area samples were asked for and vertices are excluded");
 
+  const Vec3d shift = from.origin() - to.origin();
   const std::size_t area_chunks = (area_count + chunk_samples - 1) / chunk_samples;
   const std::size_t vertex_chunks = (vertex_count + chunk_samples - 1) / chunk_samples;
   const std::size_t chunks = area_chunks + vertex_chunks;
@@ -105,7 +110,7 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
                 points[i - first] = source.vertex(source.referenced_vertices[i]);
               n = last - first;
             }
-            stats[chunk] = measure_points(to, points.data(), n);
+            stats[chunk] = measure_points(to, points.data(), n, shift);
           }
         },
         tbb::simple_partitioner());
@@ -122,7 +127,7 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
 
   OneSidedDistance result;
   result.hausdorff = all.max;
-  result.farthest = all.farthest;
+  result.farthest = all.farthest + to.origin();  // measured in `to`'s frame
   result.mean = averaged.sum / double(averaged.count);
   result.rms = std::sqrt(averaged.sum_squares / double(averaged.count));
   result.samples = area_count;

@@ -98,6 +98,7 @@ void remember_embree_error(void* user, RTCError code, const char* message) {
 DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(std::make_unique<Impl>()) {
   Impl& impl = *impl_;
   impl.name = std::move(name);
+  impl.origin = mesh.origin;
   if (mesh.triangles.empty()) throw Error(impl.name, {}, "the mesh has no triangles to measure");
   const std::size_t vertex_count = mesh.positions.size();
   for (std::size_t v = 0; v < vertex_count; ++v) {
@@ -195,6 +196,10 @@ double DistanceIndex::area() const {
 }
 Box3 DistanceIndex::bounds() const {
   return impl_->bounds;
+}
+
+Vec3d DistanceIndex::origin() const {
+  return impl_->origin;
 }
 
 namespace {

@@ -29,7 +29,8 @@ struct DistanceIndex::Impl {
   std::size_t last_sampled_triangle = 0;   // the last triangle of positive area
   std::vector<Index> referenced_vertices;  // ascending
   Box3 bounds;
-  double coordinate_scale = 0;  // largest absolute coordinate: sizes the margin for Embree's float culling
+  Vec3d origin = Vec3d::Zero();  // the mesh's (IndexedMesh::origin): positions are relative to it
+  double coordinate_scale = 0;   // largest absolute coordinate: sizes the margin for Embree's float culling
 
   Impl() = default;
   Impl(const Impl&) = delete;

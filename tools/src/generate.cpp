@@ -61,6 +61,8 @@ class ScanSurface {
   explicit ScanSurface(const GenerateOptions& options) : options_(options) {
     if (options.components < 1 || options.components > 1000) throw Error("--components must be in 1..1000");
     if (options.holes < 0 || options.holes > 6) throw Error("--holes must be in 0..6 (one per cube face)");
+    if (!options.offset.allFinite() || options.offset.cwiseAbs().maxCoeff() > 1e15)
+      throw Error("--offset must be finite, within 1e15 of zero");
     if (!(options.noise >= 0.0) || options.noise > 10.0) throw Error("--noise must be in 0..10");
     const double per_component = static_cast<double>(options.triangles) / options.components;
     n_ = std::max<std::uint64_t>(static_cast<std::uint64_t>(std::llround(std::sqrt(per_component / 12.0))),
@@ -224,7 +226,9 @@ class ScanSurface {
     const Vec3d t1 = (std::abs(d.x()) < 0.9 ? Vec3d::UnitX() : Vec3d::UnitY()).cross(d).normalized();
     const Vec3d t2 = d.cross(t1);
     const double h = 1e-5;
-    auto point = [&](const Vec3d& dir) -> Vec3d { return radius(component, dir.normalized()) * dir.normalized(); };
+    auto point = [&](const Vec3d& dir) -> Vec3d {
+      return radius(component, dir.normalized()) * dir.normalized();
+    };
     const Vec3d n = (point(d + h * t1) - point(d - h * t1)).cross(point(d + h * t2) - point(d - h * t2));
     return n.normalized();
   }
@@ -392,6 +396,7 @@ GeneratedCounts generate_scan_ply(const std::string& path, const GenerateOptions
   layout.normals = options.normals;
   layout.colors = options.colors;
   layout.ascii = options.ascii;
+  layout.origin = options.offset;
   PlyStreamWriter writer(path, layout);
   const GeneratedCounts counts = generate(
       options,
@@ -413,6 +418,7 @@ IndexedMesh generate_scan_mesh(const GenerateOptions& options) {
   if (expected.faces > 200'000'000)
     throw Error("generate_scan_mesh: too large for memory; stream it to a file");
   IndexedMesh mesh;
+  mesh.origin = options.offset;
   mesh.positions.reserve(expected.vertices);
   mesh.triangles.reserve(expected.faces);
   generate(

@@ -72,6 +72,9 @@ class DistanceIndex {
   std::size_t referenced_vertex_count() const;  // vertices that some triangle uses: the vertex samples
   double area() const;
   Box3 bounds() const;  // of every position, like IndexedMesh::bounds()
+  // The mesh's origin: positions, samples and bounds are relative to it. Meshes with different origins are
+  // measured in a common frame (each sample moved by the difference of the two origins, in double).
+  Vec3d origin() const;
 
   struct Impl;  // defined in tools/src/compare_index.h, for the implementation only
   const Impl& impl() const { return *impl_; }
@@ -95,7 +98,9 @@ struct OneSidedDistance {
   double rms = 0;
   std::size_t samples = 0;         // area samples taken
   std::size_t vertex_samples = 0;  // vertices taken (Hausdorff only)
-  Vec3d farthest = Vec3d::Zero();  // the sample where the Hausdorff distance is reached (the first, on ties)
+  // The sample where the Hausdorff distance is reached (the first, on ties), in the file's coordinates (with
+  // the origin added).
+  Vec3d farthest = Vec3d::Zero();
 };
 
 struct SurfaceDistance {

@@ -22,8 +22,11 @@ struct GenerateOptions {
   bool normals = false;  // write per-vertex normals (of the smooth surface)
   bool colors = false;   // write per-vertex colors (a function of position)
   bool ascii = false;    // ascii PLY instead of binary
-  int threads = 0;       // 0: all cores; output does not depend on it
-  ProgressFn progress;   // "generate" phase, in faces written
+  // Where the mesh is placed: about a unit blob around this point. Unless it is zero the PLY holds double
+  // coordinates, as georeferenced scans do (IndexedMesh::origin).
+  Vec3d offset = Vec3d::Zero();
+  int threads = 0;      // 0: all cores; output does not depend on it
+  ProgressFn progress;  // "generate" phase, in faces written
 };
 
 // What a generator run produces: each component is the surface of a cube lattice of n x n quads a side,
