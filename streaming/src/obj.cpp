@@ -215,29 +215,12 @@ class ObjStream final : public TriangleStream {
 
   void parse_vertex(const char* p, const char* end) {
     float values[7];
-    // Far from zero, x y z are read as doubles and taken relative to the origin (the first vertex) before
-    // they are narrowed; near zero they are rounded straight to float, once (see far_origin).
-    double precise[7];
-    const bool first = seen_.v == 0;
-    const bool wide = first || vertices_.origin != Vec3d::Zero();
-    const int count = wide ? parse_numbers(p, end, precise, 7) : parse_numbers(p, end, values, 7);
+    const int count =
+        seen_.v == 0 || shifted_ ? parse_far_vertex(p, end, values) : parse_numbers(p, end, values, 7);
     if (count != 3 && count != 4 && count != 6 && count != 7)
       fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
            " numbers)");
     if (seen_.v >= kNone) fail("more than 2^32-2 vertices");
-    if (first) vertices_.origin = far_origin(Vec3d(precise[0], precise[1], precise[2]));
-    if (wide && vertices_.origin == Vec3d::Zero()) {
-      parse_numbers(p, end, values, 7);  // the first vertex, near zero: as every other will be read
-    } else if (wide) {
-      for (int k = 0; k < count; ++k) values[k] = static_cast<float>(precise[k]);
-      for (int k = 0; k < 3; ++k) {
-        values[k] = static_cast<float>(precise[k] - vertices_.origin[k]);
-        if (!std::isfinite(values[k]))
-          fail(
-              "a coordinate lies beyond the float range (+-3.4e38) from the first vertex, which positions "
-              "are held relative to");
-      }
-    }
     const Vec3f position(values[0], values[1], values[2]);
     bounds_.add(position);
     if (vertex_sink_) {
@@ -255,6 +238,29 @@ class ObjStream final : public TriangleStream {
     } else if (!vertices_.colors.empty()) {
       vertices_.colors.push_back({255, 255, 255, 255});
     }
+  }
+
+  // The first vertex, and every vertex once it has set an origin: x y z are read as doubles and taken
+  // relative to the origin before they are narrowed to float. Near zero the first vertex sets none and is
+  // read as every other will be, each number rounded straight to float (see far_origin). Returns the count.
+  [[gnu::noinline]] int parse_far_vertex(const char* p, const char* end, float* values) {
+    double precise[7];
+    const int count = parse_numbers(p, end, precise, 7);
+    if (count < 3) return count;
+    if (seen_.v == 0) {
+      vertices_.origin = far_origin(Vec3d(precise[0], precise[1], precise[2]));
+      shifted_ = vertices_.origin != Vec3d::Zero();
+      if (!shifted_) return parse_numbers(p, end, values, 7);
+    }
+    for (int k = 0; k < count; ++k) values[k] = static_cast<float>(precise[k]);
+    for (int k = 0; k < 3; ++k) {
+      values[k] = static_cast<float>(precise[k] - vertices_.origin[k]);
+      if (!std::isfinite(values[k]))
+        fail(
+            "a coordinate lies beyond the float range (+-3.4e38) from the first vertex, which positions are "
+            "held relative to");
+    }
+    return count;
   }
 
   void parse_uv(const char* p, const char* end) {
@@ -395,6 +401,7 @@ class ObjStream final : public TriangleStream {
   ProgressFn progress_;
   // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;
+  bool shifted_ = false;  // the first vertex set a nonzero origin (see parse_far_vertex)
   std::vector<Vec3f> sink_buffer_;
   static constexpr std::size_t kSinkChunk = 1 << 16;
 
