@@ -183,7 +183,7 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
   const FileFormat format = options.format ? *options.format : format_from_extension(path);
   if (mesh.origin != Vec3d::Zero() && !holds_origin(format)) {
     std::fprintf(stderr,
-                 "ocsimp: warning: %s holds float coordinates only: the input's coordinates, far from zero "
+                 "ocsimp: warning: %s holds float coordinates only: the mesh's coordinates, far from zero "
                  "(%.17g, %.17g, %.17g), lose precision there; write PLY or OBJ to keep it\n",
                  path.c_str(), mesh.origin.x(), mesh.origin.y(), mesh.origin.z());
   }

@@ -57,7 +57,7 @@ void add_gen_command(CLI::App& app) {
       counts = {0, mesh.vertex_count(), mesh.face_count()};
       WriteOptions write;
       write.ascii = flags->options.ascii;
-      write_mesh(flags->output, mesh, write);
+      write_result(flags->output, mesh, write);
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (!flags->quiet) {
