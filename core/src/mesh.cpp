@@ -12,10 +12,18 @@ Box3 IndexedMesh::bounds() const {
   return box;
 }
 
-Vec3d far_origin(const Vec3d& first) {
-  const double largest = first.cwiseAbs().maxCoeff();
-  // Past float's range the readers refuse the vertex; an origin there would hide it.
-  return largest > kFarFromOrigin && largest <= std::numeric_limits<float>::max() ? first : Vec3d::Zero();
+Vec3d far_origin(std::vector<Vec3d> first) {
+  if (first.empty()) return Vec3d::Zero();
+  Vec3d median;
+  const auto middle = first.begin() + static_cast<std::ptrdiff_t>((first.size() - 1) / 2);
+  for (int axis = 0; axis < 3; ++axis) {
+    std::nth_element(first.begin(), middle, first.end(),
+                     [axis](const Vec3d& a, const Vec3d& b) { return a[axis] < b[axis]; });
+    median[axis] = (*middle)[axis];
+  }
+  const double largest = median.cwiseAbs().maxCoeff();
+  // Past float's range the readers refuse a vertex; an origin there would hide it.
+  return largest > kFarFromOrigin && largest <= std::numeric_limits<float>::max() ? median : Vec3d::Zero();
 }
 
 std::vector<Quadric> face_quadrics_per_vertex(const IndexedMesh& mesh) {

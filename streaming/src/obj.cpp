@@ -195,6 +195,7 @@ class ObjStream final : public TriangleStream {
     }
     if (face_statements_ == 0) first_face_ = {reader_.file_size(), lines_.line_number() + 1, seen_};
     needs_attribute_pass_ = faces_have_slashes_ && (!uv_records_.empty() || !normal_records_.empty());
+    if (!origin_settled_) settle_origin();  // fewer vertices than the sample
     flush_sink();
     total_ = seen_;
   }
@@ -215,50 +216,80 @@ class ObjStream final : public TriangleStream {
 
   void parse_vertex(const char* p, const char* end) {
     float values[7];
-    const int count =
-        seen_.v == 0 || shifted_ ? parse_far_vertex(p, end, values) : parse_numbers(p, end, values, 7);
+    const int count = shifted_ ? parse_far_vertex(p, end, values) : parse_numbers(p, end, values, 7);
     if (count != 3 && count != 4 && count != 6 && count != 7)
       fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
            " numbers)");
     if (seen_.v >= kNone) fail("more than 2^32-2 vertices");
     const Vec3f position(values[0], values[1], values[2]);
-    bounds_.add(position);
+    if (!origin_settled_) {
+      // Also held in double until the origin is chosen from them (see settle_origin).
+      double precise[7];
+      parse_numbers(p, end, precise, 7);
+      origin_sample_.push_back({Vec3d(precise[0], precise[1], precise[2]), statement_line_});
+    } else {
+      bounds_.add(position);
+    }
     if (vertex_sink_) {
       sink_buffer_.push_back(position);
-      if (sink_buffer_.size() == kSinkChunk) flush_sink();
-      return;
+    } else {
+      vertices_.positions.push_back(position);
+      const bool has_color = count >= 6;
+      if (has_color && vertices_.colors.empty())
+        vertices_.colors.assign(vertices_.positions.size() - 1, Color{255, 255, 255, 255});
+      if (has_color) {
+        const float* rgb = values + (count - 3);
+        vertices_.colors.push_back(
+            {color_channel(rgb[0]), color_channel(rgb[1]), color_channel(rgb[2]), 255});
+      } else if (!vertices_.colors.empty()) {
+        vertices_.colors.push_back({255, 255, 255, 255});
+      }
     }
-    vertices_.positions.push_back(position);
-    const bool has_color = count >= 6;
-    if (has_color && vertices_.colors.empty())
-      vertices_.colors.assign(vertices_.positions.size() - 1, Color{255, 255, 255, 255});
-    if (has_color) {
-      const float* rgb = values + (count - 3);
-      vertices_.colors.push_back({color_channel(rgb[0]), color_channel(rgb[1]), color_channel(rgb[2]), 255});
-    } else if (!vertices_.colors.empty()) {
-      vertices_.colors.push_back({255, 255, 255, 255});
-    }
+    if (!origin_settled_ && origin_sample_.size() == kOriginSample) settle_origin();
+    if (vertex_sink_ && sink_buffer_.size() == kSinkChunk) flush_sink();
   }
 
-  // The first vertex, and every vertex once it has set an origin: x y z are read as doubles and taken
-  // relative to the origin before they are narrowed to float. Near zero the first vertex sets none and is
-  // read as every other will be, each number rounded straight to float (see far_origin). Returns the count.
+  // Chooses the origin from the vertices held so far (far_origin). Far from zero, those vertices, still at
+  // the front of the positions (nothing reaches the sink before this), are set again relative to it, and
+  // every later one is read in double (parse_far_vertex). Near zero they stay as read: rounded straight to
+  // float.
+  void settle_origin() {
+    std::vector<Vec3d> first(origin_sample_.size());
+    for (std::size_t i = 0; i < first.size(); ++i) first[i] = origin_sample_[i].read;
+    vertices_.origin = far_origin(std::move(first));
+    shifted_ = vertices_.origin != Vec3d::Zero();
+    std::vector<Vec3f>& positions = vertex_sink_ ? sink_buffer_ : vertices_.positions;
+    for (std::size_t i = 0; i < origin_sample_.size(); ++i) {
+      if (shifted_) positions[i] = relative_position(origin_sample_[i].read, origin_sample_[i].line);
+      bounds_.add(positions[i]);
+    }
+    origin_sample_ = {};
+    origin_settled_ = true;
+  }
+
+  Vec3f relative_position(const Vec3d& read, std::uint64_t line) const {
+    const Vec3d local = read - vertices_.origin;
+    if (!local.allFinite() || local.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
+      throw Error(reader_.path(), FilePosition::line(line),
+                  "a coordinate lies beyond the float range (+-3.4e38) from the other vertices, which "
+                  "positions are held relative to");
+    }
+    return local.cast<float>();
+  }
+
+  // A vertex once the origin is away from zero: x y z read as doubles, then taken relative to it before they
+  // are narrowed to float. Returns the count of numbers.
   [[gnu::noinline]] int parse_far_vertex(const char* p, const char* end, float* values) {
     double precise[7];
     const int count = parse_numbers(p, end, precise, 7);
-    if (count < 3) return count;
-    if (seen_.v == 0) {
-      vertices_.origin = far_origin(Vec3d(precise[0], precise[1], precise[2]));
-      shifted_ = vertices_.origin != Vec3d::Zero();
-      if (!shifted_) return parse_numbers(p, end, values, 7);
+    for (int k = 0; k < count; ++k) {
+      if (!(std::abs(precise[k]) <= std::numeric_limits<float>::max()))
+        fail("a number beyond the float range (+-3.4e38), which vertices are held in");
+      values[k] = static_cast<float>(precise[k]);
     }
-    for (int k = 0; k < count; ++k) values[k] = static_cast<float>(precise[k]);
-    for (int k = 0; k < 3; ++k) {
-      values[k] = static_cast<float>(precise[k] - vertices_.origin[k]);
-      if (!std::isfinite(values[k]))
-        fail(
-            "a coordinate lies beyond the float range (+-3.4e38) from the first vertex, which positions are "
-            "held relative to");
+    if (count >= 3) {
+      const Vec3f position = relative_position(Vec3d(precise[0], precise[1], precise[2]), statement_line_);
+      for (int k = 0; k < 3; ++k) values[k] = position[k];
     }
     return count;
   }
@@ -340,6 +371,7 @@ class ObjStream final : public TriangleStream {
 
   void flush_sink() {
     if (sink_buffer_.empty()) return;
+    if (!origin_settled_) settle_origin();
     vertex_sink_(sink_buffer_.data(), sink_buffer_.size());
     sink_buffer_.clear();
   }
@@ -401,7 +433,14 @@ class ObjStream final : public TriangleStream {
   ProgressFn progress_;
   // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;
-  bool shifted_ = false;  // the first vertex set a nonzero origin (see parse_far_vertex)
+  // The first vertices, in double with their lines, until the origin is chosen from them (settle_origin).
+  struct SampledVertex {
+    Vec3d read;
+    std::uint64_t line;
+  };
+  std::vector<SampledVertex> origin_sample_;
+  bool origin_settled_ = false;
+  bool shifted_ = false;  // the origin is not zero: vertices are read in double (parse_far_vertex)
   std::vector<Vec3f> sink_buffer_;
   static constexpr std::size_t kSinkChunk = 1 << 16;
 

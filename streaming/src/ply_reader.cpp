@@ -346,6 +346,10 @@ class PlyStream final : public TriangleStream {
   void load_positions_directly();
   void load_vertex_records();
   void add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset);
+  // A read position as a float offset from the origin; `where` (a line or byte offset) places the error.
+  Vec3f relative_position(std::size_t index, const Vec3d& read, std::uint64_t where) const;
+  void settle_origin();
+  // Hands the positions read so far to the sink, when there is one (settling the origin first).
   void flush_vertices();
   void check_end_of_data();
   void report_progress(bool final = false);
@@ -361,8 +365,14 @@ class PlyStream final : public TriangleStream {
   detail::ByteReader reader_;
   ProgressFn progress_;
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;  // out of core: vertices go there, not kept
-  // x, y or z is a double or a 32-bit integer, more precise than a float far from zero (see far_origin).
-  bool precise_positions_ = false;
+  // Until x y z of double or 32-bit integer type (more precise than floats far from zero) have given the
+  // origin, the first vertices are held in double with where they were read (see far_origin).
+  struct SampledVertex {
+    Vec3d read;
+    std::uint64_t where;  // line (ascii) or byte offset
+  };
+  bool origin_settled_ = true;
+  std::vector<SampledVertex> origin_sample_;
   std::size_t capacity_;
   PlyHeader header_;
   bool ascii_ = false;
@@ -467,7 +477,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     const PlyType type = vertex_element.properties[i].type;
     if ((slot == Slot::x || slot == Slot::y || slot == Slot::z) &&
         (type == PlyType::float64 || type == PlyType::int32 || type == PlyType::uint32)) {
-      precise_positions_ = true;
+      origin_settled_ = false;
     }
   }
 
@@ -843,22 +853,28 @@ void PlyStream::load_vertices() {
   } else {
     load_vertex_records();
   }
+  if (!origin_settled_) settle_origin();  // fewer vertices than the sample
   report_progress();
 }
 
 void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset) {
   const Vec3d read(values.position[0], values.position[1], values.position[2]);
-  if (index == 0 && precise_positions_) vertices_.origin = far_origin(read);
-  const Vec3d local = read - vertices_.origin;
-  const Vec3f position(to_float(local.x()), to_float(local.y()), to_float(local.z()));
-  if (!position.allFinite()) {
+  // Beyond float's range a coordinate is refused wherever the origin falls (it never lies beyond that range).
+  if (!read.allFinite() || read.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
     const std::string reason =
         "vertex " + std::to_string(index) + " has a coordinate that is not a finite float";
     if (ascii_) fail(reason);
     fail_at_byte(offset, reason);
   }
-  vertices_.positions.push_back(position);
-  bounds_.add(position);
+  if (!origin_settled_) {
+    // Held in double until the origin is chosen from them (see settle_origin).
+    origin_sample_.push_back({read, ascii_ ? line_ : offset});
+    vertices_.positions.emplace_back(Vec3f::Zero());
+    if (origin_sample_.size() == kOriginSample) settle_origin();
+  } else {
+    vertices_.positions.push_back(relative_position(index, read, ascii_ ? line_ : offset));
+    bounds_.add(vertices_.positions.back());
+  }
   if (vertex_plan_.normals)
     vertices_.normals.emplace_back(values.normal[0], values.normal[1], values.normal[2]);
   if (vertex_plan_.colors) vertices_.colors.push_back(values.color);
@@ -1029,8 +1045,35 @@ void PlyStream::load_vertex_records() {
   flush_vertices();
 }
 
+Vec3f PlyStream::relative_position(std::size_t index, const Vec3d& read, std::uint64_t where) const {
+  const Vec3d local = read - vertices_.origin;
+  const Vec3f position(to_float(local.x()), to_float(local.y()), to_float(local.z()));
+  if (!position.allFinite()) {
+    throw Error(
+        path(), ascii_ ? FilePosition::line(where) : FilePosition::byte(where),
+        "vertex " + std::to_string(index) +
+            " lies beyond the float range (+-3.4e38) from the other vertices, which positions are held "
+            "relative to");
+  }
+  return position;
+}
+
+void PlyStream::settle_origin() {
+  std::vector<Vec3d> first(origin_sample_.size());
+  for (std::size_t i = 0; i < first.size(); ++i) first[i] = origin_sample_[i].read;
+  vertices_.origin = far_origin(std::move(first));
+  // The held vertices are the first ones, still at the front of the array (nothing was flushed before).
+  for (std::size_t i = 0; i < origin_sample_.size(); ++i) {
+    vertices_.positions[i] = relative_position(i, origin_sample_[i].read, origin_sample_[i].where);
+    bounds_.add(vertices_.positions[i]);
+  }
+  origin_sample_ = {};
+  origin_settled_ = true;
+}
+
 void PlyStream::flush_vertices() {
   if (!vertex_sink_ || vertices_.positions.empty()) return;
+  if (!origin_settled_) settle_origin();
   vertex_sink_(vertices_.positions.data(), vertices_.positions.size());
   vertices_.positions.clear();
   vertices_.normals.clear();

@@ -1,10 +1,12 @@
 // Coordinates far from zero (IndexedMesh::origin): files that hold them more precisely than floats are read
-// relative to their first vertex, and the writers put the origin back, so a georeferenced scan keeps detail
-// that floats at its coordinates could not hold (float spacing is 0.25 at 4e6).
+// relative to a point of their own (the median of their first vertices), and the writers put the origin back,
+// so a georeferenced scan keeps detail that floats at its coordinates could not hold (float spacing is 0.25
+// at 4e6).
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -62,13 +64,17 @@ std::string binary_ply(const TrueMesh& mesh, const std::string& type) {
   return out;
 }
 
+// Decimal text that reads back as exactly `value` (17 significant digits).
+std::string decimal(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.17g", value);
+  return text;
+}
+
 std::string obj_text(const TrueMesh& mesh) {
   std::string out;
-  char line[128];
-  for (const Vec3d& p : mesh.points) {
-    std::snprintf(line, sizeof line, "v %.17g %.17g %.17g\n", p.x(), p.y(), p.z());
-    out += line;
-  }
+  for (const Vec3d& p : mesh.points)
+    out += "v " + decimal(p.x()) + " " + decimal(p.y()) + " " + decimal(p.z()) + "\n";
   for (const Triangle& t : mesh.triangles)
     out += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) +
            "\n";
@@ -84,16 +90,84 @@ double largest_error(const IndexedMesh& mesh, const TrueMesh& truth) {
   return worst;
 }
 
-TEST(Origin, DoublePlyFarFromZeroIsReadRelativeToItsFirstVertex) {
+// The origin lies among the vertices: within the tile, whose corner is `at`.
+void expect_origin_in_tile(const IndexedMesh& mesh, const Vec3d& at) {
+  const Vec3d from_corner = mesh.origin - at;
+  EXPECT_TRUE(from_corner.x() >= 0 && from_corner.x() <= 0.5 && from_corner.y() >= 0 &&
+              from_corner.y() <= 0.5 && std::abs(from_corner.z()) <= 0.001)
+      << from_corner.transpose();
+}
+
+TEST(Origin, DoublePlyFarFromZeroIsReadRelativeToAPointOfItsOwn) {
   TempDir dir;
   const TrueMesh truth = bumpy_tile(kFar);
   test::write_file_bytes(dir / "far.ply", binary_ply(truth, "double"));
   const IndexedMesh mesh = read_mesh(dir / "far.ply");
-  EXPECT_EQ(mesh.origin, truth.points[0]);
-  EXPECT_EQ(mesh.positions[0], Vec3f::Zero());
+  expect_origin_in_tile(mesh, kFar);
   // Positions within 0.5 of the origin: float spacing there is 3e-8, where at 4e6 it would be 0.25.
   EXPECT_LT(largest_error(mesh, truth), 1e-7);
   EXPECT_EQ(mesh.triangles, truth.triangles);
+}
+
+// A stray first vertex (a georeference marker, an outlier) does not choose the origin: the median of the
+// first vertices does, so the rest keep their precision, and near zero they read exactly as floats.
+TEST(Origin, AStrayFirstVertexDoesNotChooseIt) {
+  TempDir dir;
+  for (const Vec3d& tile_at : {kFar, Vec3d(0.25, 0.5, 0)}) {
+    for (const Vec3d& stray : {Vec3d(1e30, 0, 0), Vec3d(-3e5, 7e6, 10), Vec3d(0, 0, 0)}) {
+      TrueMesh truth = bumpy_tile(tile_at);
+      truth.points.insert(truth.points.begin(), stray);  // unreferenced
+      for (Triangle& t : truth.triangles) {
+        for (Index& v : t) ++v;
+      }
+      test::write_file_bytes(dir / "stray.ply", binary_ply(truth, "double"));
+      test::write_file_bytes(dir / "stray.obj", obj_text(truth));
+      for (const char* name : {"stray.ply", "stray.obj"}) {
+        SCOPED_TRACE(std::string(name) + " stray at " + std::to_string(stray.x()));
+        const IndexedMesh mesh = read_mesh(dir / name);
+        if (tile_at == kFar) {
+          expect_origin_in_tile(mesh, kFar);
+        } else {
+          EXPECT_EQ(mesh.origin, Vec3d::Zero());
+        }
+        double worst = 0;
+        for (std::size_t i = 1; i < truth.points.size(); ++i) {
+          const Vec3d at = mesh.origin + mesh.positions[i].cast<double>();
+          worst = std::max(worst, (at - truth.points[i]).norm());
+          if (tile_at != kFar) {
+            // Each number rounded once, straight to float: from the double (PLY) or from the text (OBJ).
+            Vec3f expected = truth.points[i].cast<float>();
+            if (std::string(name) == "stray.obj") {
+              for (int k = 0; k < 3; ++k)
+                expected[k] = std::strtof(decimal(truth.points[i][k]).c_str(), nullptr);
+            }
+            EXPECT_EQ(mesh.positions[i], expected) << i;
+          }
+        }
+        EXPECT_LT(worst, 1e-7);
+      }
+    }
+  }
+}
+
+// Floats at +-3e38 are each in range, but not 6e38 apart: the one that cannot be held relative to the origin
+// is named with its byte offset.
+TEST(Origin, AVertexBeyondFloatRangeFromTheOriginIsAnError) {
+  TempDir dir;
+  TrueMesh mesh;
+  mesh.points = {{3e38, 0, 0}, {-3e38, 0, 0}, {3e38, 1, 0}};
+  mesh.triangles = {{0, 1, 2}};
+  const std::string bytes = binary_ply(mesh, "double");
+  test::write_file_bytes(dir / "wide.ply", bytes);
+  try {
+    read_mesh(dir / "wide.ply");
+    ADD_FAILURE() << "read";
+  } catch (const Error& e) {
+    const std::size_t vertex_1 = bytes.find("end_header\n") + 11 + 24;  // after one x y z of doubles
+    EXPECT_EQ(e.position().value, vertex_1);
+    EXPECT_NE(std::string(e.what()).find("vertex 1 lies beyond the float range"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(Origin, IntegerCoordinatesFarFromZeroToo) {
@@ -103,7 +177,7 @@ TEST(Origin, IntegerCoordinatesFarFromZeroToo) {
     p = Vec3d(123'456'789, 987'654'321, 0) + (1000.0 * p).array().round().matrix();
   test::write_file_bytes(dir / "int.ply", binary_ply(truth, "int"));
   const IndexedMesh mesh = read_mesh(dir / "int.ply");
-  EXPECT_EQ(mesh.origin, truth.points[0]);
+  EXPECT_NE(mesh.origin, Vec3d::Zero());
   EXPECT_EQ(largest_error(mesh, truth), 0.0);  // integers up to 500 apart are exact floats
 }
 
@@ -126,7 +200,7 @@ TEST(Origin, ObjTextFarFromZero) {
   const TrueMesh truth = bumpy_tile(kFar);
   test::write_file_bytes(dir / "far.obj", obj_text(truth));
   const IndexedMesh mesh = read_mesh(dir / "far.obj");
-  EXPECT_EQ(mesh.origin, truth.points[0]);
+  expect_origin_in_tile(mesh, kFar);
   EXPECT_LT(largest_error(mesh, truth), 1e-7);
   // Near zero, OBJ text is still rounded straight to float.
   const TrueMesh near = bumpy_tile(Vec3d(0.1, 0.2, 0.3));
@@ -183,15 +257,22 @@ TEST(Origin, OutOfCoreReadsAndSoupStreamsKeepIt) {
     options.memory_budget = 1200;  // 100 of the 441 vertices: the faces are dereferenced on disk
     auto stream = open_triangle_stream(dir / name, options);
     ASSERT_TRUE(dereferenced_out_of_core(*stream)) << name;
-    EXPECT_EQ(stream->vertices().origin, truth.points[0]) << name;
+    const Vec3d origin = stream->vertices().origin;
+    EXPECT_EQ(origin, read_mesh(dir / name).origin) << name;  // as read in memory
     const IndexedMesh welded = read_mesh(*stream);
-    EXPECT_EQ(welded.origin, truth.points[0]) << name;
+    EXPECT_EQ(welded.origin, origin) << name;
     EXPECT_EQ(welded.triangles.size(), truth.triangles.size()) << name;
+    // Welded from the corners: every vertex is a true one, to float precision around the origin.
+    for (const Vec3f& p : welded.positions) {
+      double nearest = 1e300;
+      for (const Vec3d& q : truth.points) nearest = std::min(nearest, (origin + p.cast<double>() - q).norm());
+      EXPECT_LT(nearest, 1e-7) << name;
+    }
   }
   IndexedMesh mesh = read_mesh(dir / "far.ply");
   const auto soup = make_mesh_stream(mesh, /*as_soup=*/true);
-  EXPECT_EQ(soup->vertices().origin, truth.points[0]);
-  EXPECT_EQ(make_mesh_stream(mesh)->vertices().origin, truth.points[0]);
+  EXPECT_EQ(soup->vertices().origin, mesh.origin);
+  EXPECT_EQ(make_mesh_stream(mesh)->vertices().origin, mesh.origin);
 }
 
 }  // namespace

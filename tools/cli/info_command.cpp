@@ -55,9 +55,9 @@ void add_info_command(CLI::App& app) {
     std::printf("  attributes             %s%s%s%s\n", mesh.has_normals() ? "normals " : "",
                 mesh.has_colors() ? "colors " : "", mesh.has_uvs() ? "uvs " : "",
                 mesh.has_normals() || mesh.has_colors() || mesh.has_uvs() ? "" : "none");
-    // Enough digits to tell the box's sides apart however far from zero it lies.
-    const int digits =
-        6 + std::max(0, int(std::ceil(std::log10(std::max(1.0, mesh.origin.cwiseAbs().maxCoeff())))));
+    // Enough digits to tell the box's sides apart however far from zero it lies, up to what a double holds.
+    const int digits = std::min(
+        17, 6 + std::max(0, int(std::ceil(std::log10(std::max(1.0, mesh.origin.cwiseAbs().maxCoeff()))))));
     std::printf("  bounding box           (%.*g, %.*g, %.*g) .. (%.*g, %.*g, %.*g)\n", digits, box.lo.x(),
                 digits, box.lo.y(), digits, box.lo.z(), digits, box.hi.x(), digits, box.hi.y(), digits,
                 box.hi.z());

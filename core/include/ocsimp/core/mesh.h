@@ -15,7 +15,7 @@ namespace ocsimp {
 // Positions are 32-bit floats relative to `origin`: vertex i lies at origin + positions[i], summed in double.
 // Float spacing grows with distance from zero (about 0.008 at 10^5, 0.5 at 10^7), so a scan stored in
 // georeferenced double coordinates would lose its detail to rounding if held in floats as it stands: the
-// readers take such a file relative to its first vertex instead (see far_origin), every stage keeps that
+// readers take such a file relative to a point of its own instead (see far_origin), every stage keeps that
 // origin, and the writers add it back. Everywhere else the origin is zero.
 struct IndexedMesh {
   Vec3d origin = Vec3d::Zero();
@@ -35,13 +35,16 @@ struct IndexedMesh {
 
 // Past this distance from zero on some axis, float spacing exceeds 2^-14 (6e-5): a reader of coordinates held
 // more precisely than floats (double or 32-bit integer PLY properties, OBJ text) takes such a mesh relative
-// to its first vertex.
+// to a point of its own.
 inline constexpr double kFarFromOrigin = 1024.0;
+// The vertices a reader of such coordinates holds in double until it has chosen the origin from them.
+inline constexpr std::size_t kOriginSample = 1024;
 
-// The origin a reader of precise coordinates uses for a mesh whose first vertex is `first`: `first` itself
-// when it lies past kFarFromOrigin on some axis (and within float range), otherwise zero (so meshes near zero
-// read exactly as floats).
-Vec3d far_origin(const Vec3d& first);
+// The origin for a mesh whose first vertices (up to kOriginSample, in file order) are `first`: their
+// coordinate-wise median when it lies past kFarFromOrigin on some axis (and within float range), otherwise
+// zero, so meshes near zero read exactly as floats. A median, not the first vertex, so that a stray point
+// (a georeference marker, an outlier) cannot move every other vertex away from its float precision.
+Vec3d far_origin(std::vector<Vec3d> first);
 
 // A mesh whose vertices carry quadrics. `quadrics` is empty (the decimator then builds area-weighted plane
 // quadrics from the faces) or holds one quadric per vertex, summed over the *original* surface, so that costs
