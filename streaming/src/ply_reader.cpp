@@ -349,7 +349,7 @@ class PlyStream final : public TriangleStream {
   // A read position as a float offset from the origin; `where` (a line or byte offset) places the error.
   Vec3f relative_position(std::size_t index, const Vec3d& read, std::uint64_t where) const;
   void settle_origin();
-  // Hands the positions read so far to the sink, when there is one (settling the origin first).
+  // Hands the positions read so far to the sink, when there is one and the origin is chosen.
   void flush_vertices();
   void check_end_of_data();
   void report_progress(bool final = false);
@@ -853,7 +853,10 @@ void PlyStream::load_vertices() {
   } else {
     load_vertex_records();
   }
-  if (!origin_settled_) settle_origin();  // fewer vertices than the sample
+  if (!origin_settled_) {
+    settle_origin();  // fewer vertices than the sample
+    flush_vertices();
+  }
   report_progress();
 }
 
@@ -1072,8 +1075,9 @@ void PlyStream::settle_origin() {
 }
 
 void PlyStream::flush_vertices() {
-  if (!vertex_sink_ || vertices_.positions.empty()) return;
-  if (!origin_settled_) settle_origin();
+  // Until the sample is complete the vertices stay here (at most kOriginSample and a buffer's worth), so the
+  // origin comes from the same vertices in core and out of core.
+  if (!vertex_sink_ || vertices_.positions.empty() || !origin_settled_) return;
   vertex_sink_(vertices_.positions.data(), vertices_.positions.size());
   vertices_.positions.clear();
   vertices_.normals.clear();
