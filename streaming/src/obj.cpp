@@ -73,7 +73,14 @@ class ObjStream final : public TriangleStream {
         capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
         progress_(options.progress),
         vertex_sink_(options.vertex_sink) {
-    load_records();
+    try {
+      load_records();
+    } catch (const Error&) {
+      // A vertex held for the origin's sample may be bad too, and it comes first in the file: that is the
+      // error to report (settle_origin throws it), taken against the origin of the vertices read so far.
+      if (!origin_settled_) settle_origin();
+      throw;
+    }
     passes_ = needs_attribute_pass_ ? 3 : 2;
     if (needs_attribute_pass_) {
       restart_pass();
@@ -260,19 +267,22 @@ class ObjStream final : public TriangleStream {
     shifted_ = vertices_.origin != Vec3d::Zero();
     std::vector<Vec3f>& positions = vertex_sink_ ? sink_buffer_ : vertices_.positions;
     for (std::size_t i = 0; i < origin_sample_.size(); ++i) {
-      if (shifted_) positions[i] = relative_position(origin_sample_[i].read, origin_sample_[i].line);
+      if (shifted_) positions[i] = relative_position(origin_sample_[i].read, i + 1, origin_sample_[i].line);
       bounds_.add(positions[i]);
     }
     origin_sample_ = {};
     origin_settled_ = true;
   }
 
-  Vec3f relative_position(const Vec3d& read, std::uint64_t line) const {
+  // `vertex` counts from 1, as OBJ does.
+  Vec3f relative_position(const Vec3d& read, std::uint64_t vertex, std::uint64_t line) const {
     const Vec3d local = read - vertices_.origin;
     if (!local.allFinite() || local.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
-      throw Error(reader_.path(), FilePosition::line(line),
-                  "a coordinate lies beyond the float range (+-3.4e38) from the other vertices, which "
-                  "positions are held relative to");
+      throw Error(
+          reader_.path(), FilePosition::line(line),
+          "vertex " + std::to_string(vertex) +
+              " lies beyond the float range (+-3.4e38) from the other vertices, whose positions are held "
+              "relative to their median");
     }
     return local.cast<float>();
   }
@@ -283,12 +293,13 @@ class ObjStream final : public TriangleStream {
     double precise[7];
     const int count = parse_numbers(p, end, precise, 7);
     for (int k = 0; k < count; ++k) {
-      if (!(std::abs(precise[k]) <= std::numeric_limits<float>::max()))
-        fail("a number beyond the float range (+-3.4e38), which vertices are held in");
+      // Beyond float's range a number is refused with the message a float parse gives.
+      if (!(std::abs(precise[k]) <= std::numeric_limits<float>::max())) parse_numbers(p, end, values, 7);
       values[k] = static_cast<float>(precise[k]);
     }
     if (count >= 3) {
-      const Vec3f position = relative_position(Vec3d(precise[0], precise[1], precise[2]), statement_line_);
+      const Vec3f position =
+          relative_position(Vec3d(precise[0], precise[1], precise[2]), seen_.v + 1, statement_line_);
       for (int k = 0; k < 3; ++k) values[k] = position[k];
     }
     return count;

@@ -170,6 +170,31 @@ TEST(Origin, AVertexBeyondFloatRangeFromTheOriginIsAnError) {
   }
 }
 
+// Held for the origin's sample, such a vertex is still the error reported when a later one is bad too.
+TEST(Origin, TheFirstBadVertexInTheFileIsTheOneReported) {
+  TempDir dir;
+  TrueMesh mesh;
+  for (int i = 0; i < 20; ++i) mesh.points.emplace_back(3e38, i % 7, i % 5);
+  mesh.points[5] = {-3e38, 0, 0};
+  mesh.points[12] = {std::nan(""), 0, 0};
+  mesh.triangles = {{0, 1, 2}};
+  const std::string bytes = binary_ply(mesh, "double");
+  test::write_file_bytes(dir / "bad.ply", bytes);
+  test::write_file_bytes(dir / "bad.obj", obj_text(mesh));
+  for (const char* name : {"bad.ply", "bad.obj"}) {
+    try {
+      read_mesh(dir / name);
+      ADD_FAILURE() << name << " read";
+    } catch (const Error& e) {
+      const bool ply = std::string(name) == "bad.ply";
+      EXPECT_EQ(e.position().value, ply ? bytes.find("end_header\n") + 11 + 5 * 24 : 6) << name;
+      EXPECT_NE(std::string(e.what()).find(ply ? "vertex 5 lies beyond" : "vertex 6 lies beyond"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 TEST(Origin, IntegerCoordinatesFarFromZeroToo) {
   TempDir dir;
   TrueMesh truth = bumpy_tile(Vec3d::Zero());
