@@ -294,8 +294,9 @@ class ObjStream final : public TriangleStream {
     const int count = parse_numbers(p, end, precise, 7);
     for (int k = 0; k < count; ++k) {
       // Beyond float's range a number is refused with the message a float parse gives.
-      if (!(std::abs(precise[k]) <= std::numeric_limits<float>::max())) parse_numbers(p, end, values, 7);
-      values[k] = static_cast<float>(precise[k]);
+      constexpr double kLargest = std::numeric_limits<float>::max();
+      if (!(std::abs(precise[k]) <= kLargest)) parse_numbers(p, end, values, 7);
+      values[k] = static_cast<float>(std::clamp(precise[k], -kLargest, kLargest));  // text that rounds to it
     }
     if (count >= 3) {
       const Vec3f position =
@@ -382,7 +383,6 @@ class ObjStream final : public TriangleStream {
 
   void flush_sink() {
     if (sink_buffer_.empty()) return;
-    if (!origin_settled_) settle_origin();
     vertex_sink_(sink_buffer_.data(), sink_buffer_.size());
     sink_buffer_.clear();
   }
@@ -454,6 +454,8 @@ class ObjStream final : public TriangleStream {
   bool shifted_ = false;  // the origin is not zero: vertices are read in double (parse_far_vertex)
   std::vector<Vec3f> sink_buffer_;
   static constexpr std::size_t kSinkChunk = 1 << 16;
+  // The origin's sample is complete before the first chunk goes (settle_origin rewrites it in place).
+  static_assert(kSinkChunk > kOriginSample);
 
   IndexedMesh vertices_;
   Box3 bounds_;
