@@ -8,8 +8,8 @@
 //   3. stream the faces, fan-triangulating polygons.
 // Passes 2 and 3 start at the first face statement, since everything before it was loaded already.
 // Negative indices count back from the records read so far at that line, as the format specifies.
-// Accepted and ignored: comments, o g s usemtl mtllib l p vp and any unknown statement. A '\' at the end of
-// a line continues the statement on the next one.
+// Accepted and ignored: comments (whole lines, or from a '#' after a statement), o g s usemtl mtllib l p vp
+// and any unknown statement. A '\' at the end of a line continues the statement on the next one.
 #include <algorithm>
 #include <charconv>
 #include <cstring>
@@ -131,19 +131,22 @@ class ObjStream final : public TriangleStream {
     throw Error(reader_.path(), FilePosition::line(statement_line_), reason);
   }
 
-  // The next statement with any '\' continuations joined; blank and comment lines included.
+  // The next statement with any '\' continuations joined; blank and comment lines included. A comment may
+  // also follow a statement ("v 1 2 3 # corner", as most readers allow): the parsers below stop at its '#'.
   bool next_statement(std::string_view& line) {
     statement_offset_ = reader_.offset();
     if (!lines_.next(line)) return false;
     statement_line_ = lines_.line_number();
-    // A comment ending in '\' (a Windows path) does not swallow the next line.
-    if (line.empty() || line.back() != '\\' || *skip_blanks(line.data(), line.data() + line.size()) == '#')
-      return true;
+    // A '\' that ends a comment (a Windows path) continues nothing.
+    auto continued = [](std::string_view text) {
+      return !text.empty() && text.back() == '\\' && text.find('#') == std::string_view::npos;
+    };
+    if (!continued(line)) return true;
     joined_.assign(line.data(), line.size() - 1);
     std::string_view more;
     while (lines_.next(more)) {
       joined_.push_back(' ');
-      const bool continues = !more.empty() && more.back() == '\\';
+      const bool continues = continued(more);
       joined_.append(more.data(), continues ? more.size() - 1 : more.size());
       if (joined_.size() > kMaxStatementBytes)
         fail("statement continued over more than " + std::to_string(kMaxStatementBytes) + " bytes");
@@ -213,7 +216,7 @@ class ObjStream final : public TriangleStream {
     int count = 0;
     while (true) {
       Number value;
-      const NumberStatus status = parse_number(p, end, value);
+      const NumberStatus status = parse_number(p, end, value, /*comment_ends=*/true);
       if (status == NumberStatus::missing) return count;
       if (status != NumberStatus::ok) fail(describe(status, p, end));
       if (count == max) fail("too many numbers: " + quote_token(p, end) + " after " + std::to_string(max));
@@ -349,7 +352,7 @@ class ObjStream final : public TriangleStream {
   // Corners of the face statement into corners_: "v", "v/vt", "v//vn" or "v/vt/vn" each.
   void parse_face(const char* p, const char* end) {
     corners_.clear();
-    while ((p = skip_blanks(p, end)) < end) {
+    while ((p = skip_blanks(p, end)) < end && *p != '#') {
       const char* corner = p;
       Corner c{parse_index(p, end, seen_.v, total_.v, "vertex", corner), kNone, kNone};
       if (p < end && *p == '/') {
@@ -361,7 +364,7 @@ class ObjStream final : public TriangleStream {
           c.vn = parse_index(p, end, seen_.vn, total_.vn, "normal", corner);
         }
       }
-      if (p < end && !is_blank(*p)) fail("malformed face corner " + quote_token(corner, end));
+      if (p < end && !is_blank(*p) && *p != '#') fail("malformed face corner " + quote_token(corner, end));
       corners_.push_back(c);
     }
     if (corners_.size() < 3)

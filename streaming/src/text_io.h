@@ -94,15 +94,16 @@ enum class NumberStatus { ok, missing, malformed, not_finite, beyond_float };
 
 // Parses one finite number token (Number: float or double) starting at p (after blanks); on success advances
 // p past it. The token must end at a blank or at `end`: "1.5x" is malformed, not 1.5. Decimal text is rounded
-// once, straight to Number.
+// once, straight to Number. With `comment_ends`, a '#' ends the line's numbers too (OBJ's comments).
 template <class Number>
-inline NumberStatus parse_number(const char*& p, const char* end, Number& value) {
+inline NumberStatus parse_number(const char*& p, const char* end, Number& value, bool comment_ends = false) {
   static_assert(std::is_same_v<Number, float> || std::is_same_v<Number, double>);
   const char* start = skip_blanks(p, end);
-  if (start == end) return NumberStatus::missing;
+  if (start == end || (comment_ends && *start == '#')) return NumberStatus::missing;
   const char* digits = (*start == '+' && start + 1 < end && start[1] != '-') ? start + 1 : start;
   const auto result = fast_float::from_chars(digits, end, value);
-  if (result.ec != std::errc() || (result.ptr < end && !is_blank(*result.ptr)))
+  if (result.ec != std::errc() ||
+      (result.ptr < end && !is_blank(*result.ptr) && !(comment_ends && *result.ptr == '#')))
     return NumberStatus::malformed;
   if (!std::isfinite(value)) {
     if constexpr (std::is_same_v<Number, double>) return NumberStatus::not_finite;

@@ -134,6 +134,19 @@ TEST(Obj, LineContinuation) {
   EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 2, 3}}));
 }
 
+// Comments at the end of statements, as some exporters and hand edits leave them, are dropped like comment
+// lines; a '\\' inside a comment continues nothing.
+TEST(Obj, CommentsAfterStatements) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir,
+                                  "v 0 0 0 # origin\nv 1 0 0#x\nv 0 1 \\\n 0 # y, continued\nvt 0 1 # uv\n"
+                                  "v 1 1 0 # a path C:\\dir\\\nf 1 2 3 # first\nf 2 4 3#\n");
+  EXPECT_EQ(m.vertex_count(), 4u);
+  EXPECT_EQ(m.positions[1], Vec3f(1, 0, 0));
+  EXPECT_EQ(m.positions[2], Vec3f(0, 1, 0));
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {1, 3, 2}}));
+}
+
 TEST(Obj, VertexColorsAndLenientNumbers) {
   TempDir dir;
   const IndexedMesh m = read_text(dir, "v 0 0 0\nv +1e0 0 0 1 0 0.5\nv 0 1. .0 1 0 0 1\nf 1 2 3\n");
