@@ -1246,9 +1246,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   }
   point_chunks = {};
   // The stream is exhausted: its vertex array (the largest block of memory in play) is no longer needed.
-  const Vec3d origin = vertices.origin;
   vertices = IndexedMesh();
-  vertices.origin = origin;
 
   store.move_into(cells);
   if (options.boundary) {
