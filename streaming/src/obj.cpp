@@ -23,6 +23,7 @@
 #include "formats.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/atomic_file.h"
+#include "origin_sample.h"
 #include "text_io.h"
 
 namespace ocsimp::detail {
@@ -78,7 +79,7 @@ class ObjStream final : public TriangleStream {
     } catch (const Error&) {
       // A vertex held for the origin's sample may be bad too, and it comes first in the file: that is the
       // error to report (settle_origin throws it), taken against the origin of the vertices read so far.
-      if (!origin_settled_) settle_origin();
+      if (!origin_sample_.settled) settle_origin();
       throw;
     }
     passes_ = needs_attribute_pass_ ? 3 : 2;
@@ -205,7 +206,7 @@ class ObjStream final : public TriangleStream {
     }
     if (face_statements_ == 0) first_face_ = {reader_.file_size(), lines_.line_number() + 1, seen_};
     needs_attribute_pass_ = faces_have_slashes_ && (!uv_records_.empty() || !normal_records_.empty());
-    if (!origin_settled_) settle_origin();  // fewer vertices than the sample
+    if (!origin_sample_.settled) settle_origin();  // fewer vertices than the sample
     flush_sink();
     total_ = seen_;
   }
@@ -226,17 +227,19 @@ class ObjStream final : public TriangleStream {
 
   void parse_vertex(const char* p, const char* end) {
     float values[7];
-    const int count = shifted_ ? parse_far_vertex(p, end, values) : parse_numbers(p, end, values, 7);
+    const int count = vertices_.origin != Vec3d::Zero() ? parse_far_vertex(p, end, values)
+                                                        : parse_numbers(p, end, values, 7);
     if (count != 3 && count != 4 && count != 6 && count != 7)
       fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
            " numbers)");
     if (seen_.v >= kNone) fail("more than 2^32-2 vertices");
     const Vec3f position(values[0], values[1], values[2]);
-    if (!origin_settled_) {
+    if (!origin_sample_.settled) {
       // Also held in double until the origin is chosen from them (see settle_origin).
       double precise[7];
       parse_numbers(p, end, precise, 7);
-      origin_sample_.push_back({Vec3d(precise[0], precise[1], precise[2]), statement_line_});
+      origin_sample_.held.push_back(
+          {Vec3d(precise[0], precise[1], precise[2]), FilePosition::line(statement_line_)});
     } else {
       bounds_.add(position);
     }
@@ -255,39 +258,16 @@ class ObjStream final : public TriangleStream {
         vertices_.colors.push_back({255, 255, 255, 255});
       }
     }
-    if (!origin_settled_ && origin_sample_.size() == kOriginSample) settle_origin();
+    if (!origin_sample_.settled && origin_sample_.full()) settle_origin();
     if (vertex_sink_ && sink_buffer_.size() == kSinkChunk) flush_sink();
   }
 
-  // Chooses the origin from the vertices held so far (far_origin). Far from zero, those vertices, still at
-  // the front of the positions (nothing reaches the sink before this), are set again relative to it, and
-  // every later one is read in double (parse_far_vertex). Near zero they stay as read: rounded straight to
-  // float.
+  // Chooses the origin from the vertices held so far (OriginSample::settle): they are still at the front of
+  // the positions (nothing reaches the sink before this). Once it is away from zero, every later vertex is
+  // read in double (parse_far_vertex).
   void settle_origin() {
-    std::vector<Vec3d> first(origin_sample_.size());
-    for (std::size_t i = 0; i < first.size(); ++i) first[i] = origin_sample_[i].read;
-    vertices_.origin = far_origin(std::move(first));
-    shifted_ = vertices_.origin != Vec3d::Zero();
-    std::vector<Vec3f>& positions = vertex_sink_ ? sink_buffer_ : vertices_.positions;
-    for (std::size_t i = 0; i < origin_sample_.size(); ++i) {
-      if (shifted_) positions[i] = relative_position(origin_sample_[i].read, i + 1, origin_sample_[i].line);
-      bounds_.add(positions[i]);
-    }
-    origin_sample_ = {};
-    origin_settled_ = true;
-  }
-
-  // `vertex` counts from 1, as OBJ does.
-  Vec3f relative_position(const Vec3d& read, std::uint64_t vertex, std::uint64_t line) const {
-    const Vec3d local = read - vertices_.origin;
-    if (!local.allFinite() || local.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
-      throw Error(
-          reader_.path(), FilePosition::line(line),
-          "vertex " + std::to_string(vertex) +
-              " lies beyond the float range (+-3.4e38) from the other vertices, whose positions are held "
-              "relative to their median");
-    }
-    return local.cast<float>();
+    vertices_.origin =
+        origin_sample_.settle(reader_.path(), 1, vertex_sink_ ? sink_buffer_ : vertices_.positions, bounds_);
   }
 
   // A vertex once the origin is away from zero: x y z read as doubles, then taken relative to it before they
@@ -302,8 +282,8 @@ class ObjStream final : public TriangleStream {
       values[k] = static_cast<float>(std::clamp(precise[k], -kLargest, kLargest));  // text that rounds to it
     }
     if (count >= 3) {
-      const Vec3f position =
-          relative_position(Vec3d(precise[0], precise[1], precise[2]), seen_.v + 1, statement_line_);
+      const Vec3f position = float_offset(Vec3d(precise[0], precise[1], precise[2]), vertices_.origin,
+                                          reader_.path(), FilePosition::line(statement_line_), seen_.v + 1);
       for (int k = 0; k < 3; ++k) values[k] = position[k];
     }
     return count;
@@ -447,14 +427,7 @@ class ObjStream final : public TriangleStream {
   ProgressFn progress_;
   // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;
-  // The first vertices, in double with their lines, until the origin is chosen from them (settle_origin).
-  struct SampledVertex {
-    Vec3d read;
-    std::uint64_t line;
-  };
-  std::vector<SampledVertex> origin_sample_;
-  bool origin_settled_ = false;
-  bool shifted_ = false;  // the origin is not zero: vertices are read in double (parse_far_vertex)
+  OriginSample origin_sample_{{}, /*settled=*/false};  // OBJ text is more precise than floats
   std::vector<Vec3f> sink_buffer_;
   static constexpr std::size_t kSinkChunk = 1 << 16;
   // The origin's sample is complete before the first chunk goes (settle_origin rewrites it in place).

@@ -30,6 +30,7 @@
 #include "byte_reader.h"
 #include "formats.h"
 #include "ocsimp/core/error.h"
+#include "origin_sample.h"
 #include "ply_header.h"
 
 namespace ocsimp::detail {
@@ -346,8 +347,7 @@ class PlyStream final : public TriangleStream {
   void load_positions_directly();
   void load_vertex_records();
   void add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset);
-  // A read position as a float offset from the origin; `where` (a line or byte offset) places the error.
-  Vec3f relative_position(std::size_t index, const Vec3d& read, std::uint64_t where) const;
+  // Chooses the origin from the vertices held for it (OriginSample::settle).
   void settle_origin();
   // Hands the positions read so far to the sink, when there is one and the origin is chosen.
   void flush_vertices();
@@ -365,14 +365,9 @@ class PlyStream final : public TriangleStream {
   detail::ByteReader reader_;
   ProgressFn progress_;
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;  // out of core: vertices go there, not kept
-  // Until x y z of double or 32-bit integer type (more precise than floats far from zero) have given the
-  // origin, the first vertices are held in double with where they were read (see far_origin).
-  struct SampledVertex {
-    Vec3d read;
-    std::uint64_t where;  // line (ascii) or byte offset
-  };
-  bool origin_settled_ = true;
-  std::vector<SampledVertex> origin_sample_;
+  // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
+  // the start: the origin stays zero.
+  OriginSample origin_sample_;
   std::size_t capacity_;
   PlyHeader header_;
   bool ascii_ = false;
@@ -477,7 +472,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     const PlyType type = vertex_element.properties[i].type;
     if ((slot == Slot::x || slot == Slot::y || slot == Slot::z) &&
         (type == PlyType::float64 || type == PlyType::int32 || type == PlyType::uint32)) {
-      origin_settled_ = false;
+      origin_sample_.settled = false;
     }
   }
 
@@ -857,10 +852,10 @@ void PlyStream::load_vertices() {
   } catch (const Error&) {
     // A vertex held for the origin's sample may be bad too, and it comes first in the file: that is the error
     // to report (settle_origin throws it), taken against the origin of the vertices read so far.
-    if (!origin_settled_) settle_origin();
+    if (!origin_sample_.settled) settle_origin();
     throw;
   }
-  if (!origin_settled_) {
+  if (!origin_sample_.settled) {
     settle_origin();  // fewer vertices than the sample
     flush_vertices();
   }
@@ -876,13 +871,16 @@ void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::u
     if (ascii_) fail(reason);
     fail_at_byte(offset, reason);
   }
-  if (!origin_settled_) {
-    // Held in double until the origin is chosen from them (see settle_origin).
-    origin_sample_.push_back({read, ascii_ ? line_ : offset});
-    vertices_.positions.emplace_back(Vec3f::Zero());
-    if (origin_sample_.size() == kOriginSample) settle_origin();
+  const FilePosition where = ascii_ ? FilePosition::line(line_) : FilePosition::byte(offset);
+  if (!origin_sample_.settled) {
+    // Also held in double until the origin is chosen from them.
+    origin_sample_.held.push_back({read, where});
+    vertices_.positions.push_back(read.cast<float>());
+    if (origin_sample_.full()) settle_origin();
   } else {
-    vertices_.positions.push_back(relative_position(index, read, ascii_ ? line_ : offset));
+    vertices_.positions.push_back(vertices_.origin == Vec3d::Zero()
+                                      ? read.cast<float>()  // in range: checked above
+                                      : float_offset(read, vertices_.origin, path(), where, index));
     bounds_.add(vertices_.positions.back());
   }
   if (vertex_plan_.normals)
@@ -1055,36 +1053,14 @@ void PlyStream::load_vertex_records() {
   flush_vertices();
 }
 
-Vec3f PlyStream::relative_position(std::size_t index, const Vec3d& read, std::uint64_t where) const {
-  const Vec3d local = read - vertices_.origin;
-  const Vec3f position(to_float(local.x()), to_float(local.y()), to_float(local.z()));
-  if (!position.allFinite()) {
-    throw Error(
-        path(), ascii_ ? FilePosition::line(where) : FilePosition::byte(where),
-        "vertex " + std::to_string(index) +
-            " lies beyond the float range (+-3.4e38) from the other vertices, whose positions are held "
-            "relative to their median");
-  }
-  return position;
-}
-
 void PlyStream::settle_origin() {
-  std::vector<Vec3d> first(origin_sample_.size());
-  for (std::size_t i = 0; i < first.size(); ++i) first[i] = origin_sample_[i].read;
-  vertices_.origin = far_origin(std::move(first));
-  // The held vertices are the first ones, still at the front of the array (nothing was flushed before).
-  for (std::size_t i = 0; i < origin_sample_.size(); ++i) {
-    vertices_.positions[i] = relative_position(i, origin_sample_[i].read, origin_sample_[i].where);
-    bounds_.add(vertices_.positions[i]);
-  }
-  origin_sample_ = {};
-  origin_settled_ = true;
+  vertices_.origin = origin_sample_.settle(path(), 0, vertices_.positions, bounds_);
 }
 
 void PlyStream::flush_vertices() {
   // Until the sample is complete the vertices stay here (at most kOriginSample and a buffer's worth), so the
   // origin comes from the same vertices in core and out of core.
-  if (!vertex_sink_ || vertices_.positions.empty() || !origin_settled_) return;
+  if (!vertex_sink_ || vertices_.positions.empty() || !origin_sample_.settled) return;
   vertex_sink_(vertices_.positions.data(), vertices_.positions.size());
   vertices_.positions.clear();
   vertices_.normals.clear();
