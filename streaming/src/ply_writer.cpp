@@ -17,6 +17,7 @@
 #include "formats.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/atomic_file.h"
+#include "text_io.h"
 
 namespace ocsimp {
 namespace {
@@ -47,11 +48,6 @@ char* put_text(char* out, float value) {
   // Shortest form that reads back to the same float: at most 9 significant digits, so 15 characters
   // ("-1.17549435e-38").
   return std::to_chars(out, out + 16, value).ptr;
-}
-
-char* put_text(char* out, double value) {
-  // At most 17 significant digits: 24 characters ("-1.7976931348623157e+308").
-  return std::to_chars(out, out + 25, value).ptr;
 }
 
 char* put_text(char* out, std::uint32_t value) {
@@ -139,7 +135,7 @@ void PlyStreamWriter::add_vertices(const Vec3f* positions, const Vec3f* normals,
         };
         if (shifted) {
           for (int k = 0; k < 3; ++k) {
-            out = put_text(out, layout_.origin[k] + double(position[k]));
+            out = detail::print_double(out, layout_.origin[k] + double(position[k]));
             *out++ = ' ';
           }
         } else {
