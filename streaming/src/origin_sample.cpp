@@ -1,20 +1,12 @@
 #include "origin_sample.h"
 
-#include <limits>
-
 namespace ocsimp::detail {
 
-Vec3f float_offset(const Vec3d& read, const Vec3d& origin, const std::string& path, FilePosition where,
-                   std::uint64_t number) {
-  const Vec3d offset = read - origin;
-  if (!offset.allFinite() || offset.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
-    throw Error(
-        path, where,
-        "vertex " + std::to_string(number) +
-            " lies beyond the float range (+-3.4e38) from the other vertices, whose positions are held "
-            "relative to their median");
-  }
-  return offset.cast<float>();
+void fail_beyond_float_range(const std::string& path, FilePosition where, std::uint64_t number) {
+  throw Error(path, where,
+              "vertex " + std::to_string(number) +
+                  " lies beyond the float range (+-3.4e38) from the other vertices, whose positions are held "
+                  "relative to their median");
 }
 
 Vec3d OriginSample::settle(const std::string& path, std::uint64_t first_number, std::vector<Vec3f>& positions,

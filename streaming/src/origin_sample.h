@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -11,10 +12,18 @@
 
 namespace ocsimp::detail {
 
+[[noreturn]] void fail_beyond_float_range(const std::string& path, FilePosition where, std::uint64_t number);
+
 // `read` as float offsets from `origin`. Throws, naming vertex `number` at `where` of `path`, when a
-// coordinate lies beyond float range from the origin.
-Vec3f float_offset(const Vec3d& read, const Vec3d& origin, const std::string& path, FilePosition where,
-                   std::uint64_t number);
+// coordinate lies beyond float range from the origin. Inline: the readers call it for every vertex of a
+// mesh far from zero.
+inline Vec3f float_offset(const Vec3d& read, const Vec3d& origin, const std::string& path, FilePosition where,
+                          std::uint64_t number) {
+  const Vec3d offset = read - origin;
+  if (!offset.allFinite() || offset.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max())
+    fail_beyond_float_range(path, where, number);
+  return offset.cast<float>();
+}
 
 struct OriginSample {
   struct Held {
