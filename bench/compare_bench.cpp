@@ -6,6 +6,7 @@
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <cmath>
 #include <random>
 #include <vector>
 
@@ -72,6 +73,42 @@ void BM_QuerySamples(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * std::int64_t(samples.size()));
 }
 BENCHMARK(BM_QuerySamples)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// A CAD-style cone: `segments` long side slivers from a wide ring to a narrow one, and two fan caps whose
+// slivers run from the centre to the rim at every angle (boxes mostly empty, overlapping by the hundreds).
+IndexedMesh fan_cone(Index segments) {
+  IndexedMesh mesh;
+  for (Index i = 0; i < 2 * segments; ++i) {
+    const double angle = 2 * M_PI * double(i % segments) / double(segments), radius = i < segments ? 1 : 0.01;
+    mesh.positions.emplace_back(float(radius * std::cos(angle)), float(radius * std::sin(angle)),
+                                i < segments ? 0.0f : 2.0f);
+  }
+  mesh.positions.emplace_back(0.0f, 0.0f, 0.0f);
+  mesh.positions.emplace_back(0.0f, 0.0f, 2.0f);
+  for (Index i = 0; i < segments; ++i) {
+    const Index j = (i + 1) % segments;
+    mesh.triangles.push_back({i, j, segments + j});
+    mesh.triangles.push_back({i, segments + j, segments + i});
+    mesh.triangles.push_back({2 * segments, j, i});
+    mesh.triangles.push_back({2 * segments + 1, segments + i, segments + j});
+  }
+  return mesh;
+}
+
+// 100 k area samples of a 20 k-triangle mesh measured against itself as `compare` does (bounded searches,
+// all cores): arg 0 a generated scan (well-shaped triangles, the baseline), arg 1 a cone of 5,000 segments
+// (all slivers across the axes, which the index builds with spatial splits).
+void BM_MeasureSelf(benchmark::State& state) {
+  const IndexedMesh mesh = state.range(0) == 0 ? scan(20'000, 0.15) : fan_cone(5'000);
+  const DistanceIndex index(mesh);
+  CompareOptions options;
+  options.samples = 100'000;
+  options.include_vertices = false;
+  for (auto _ : state) benchmark::DoNotOptimize(measure_one_sided(index, index, options).rms);
+  state.SetItemsProcessed(state.iterations() * std::int64_t(options.samples));
+  state.counters["faces"] = double(mesh.face_count());
+}
+BENCHMARK(BM_MeasureSelf)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The requirement: 10 M triangles against 100 k, default options (1 M area samples each way plus
 // every vertex), all cores. Counters give each phase in seconds.

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -142,12 +143,39 @@ TEST(ClosestPointOnTriangle, MatchesDenseSearchOnRandomTriangles) {
   }
 }
 
-TEST(DistanceIndex, ClosestPointIsTheExactMinimumOverAllTriangles) {
-  const IndexedMesh mesh = test::sphere(3);
+// A closed cone of `segments` sides, with fan caps, tilted off the axes: every triangle a long sliver lying
+// across them, the mesh whose BVH is built with spatial splits.
+IndexedMesh tilted_cone(int segments) {
+  IndexedMesh mesh;
+  const Eigen::Matrix3f turn =
+      (Eigen::AngleAxisf(0.7f, Vec3f::UnitX()) * Eigen::AngleAxisf(0.4f, Vec3f::UnitY())).toRotationMatrix();
+  for (int ring = 0; ring < 2; ++ring) {
+    const float radius = ring == 0 ? 1.0f : 0.05f, z = ring == 0 ? -1.0f : 1.0f;
+    for (int i = 0; i < segments; ++i) {
+      const float angle = 6.2831853f * float(i) / float(segments);
+      mesh.positions.push_back(turn * Vec3f(radius * std::cos(angle), radius * std::sin(angle), z));
+    }
+  }
+  const Index bottom = static_cast<Index>(mesh.positions.size()), top = bottom + 1;
+  mesh.positions.push_back(turn * Vec3f(0, 0, -1));
+  mesh.positions.push_back(turn * Vec3f(0, 0, 1));
+  const Index n = static_cast<Index>(segments);
+  for (Index i = 0; i < n; ++i) {
+    const Index j = (i + 1) % n;
+    mesh.triangles.push_back({i, j, n + j});
+    mesh.triangles.push_back({i, n + j, n + i});
+    mesh.triangles.push_back({bottom, j, i});
+    mesh.triangles.push_back({top, n + i, n + j});
+  }
+  return mesh;
+}
+
+// Bounded and unbounded queries at random points against a brute-force minimum over every triangle.
+void expect_exact_closest_points(const IndexedMesh& mesh, std::uint64_t seed) {
   const DistanceIndex index(mesh);
   EXPECT_EQ(index.triangle_count(), mesh.face_count());
   EXPECT_EQ(index.referenced_vertex_count(), mesh.vertex_count());
-  std::mt19937_64 rng(3);
+  std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> coordinate(-2, 2);
   for (int i = 0; i < 500; ++i) {
     const Vec3d p(coordinate(rng), coordinate(rng), coordinate(rng));
@@ -163,6 +191,14 @@ TEST(DistanceIndex, ClosestPointIsTheExactMinimumOverAllTriangles) {
       EXPECT_TRUE(std::isinf(index.closest_point(p, 0.5 * std::sqrt(expected)).distance_squared));
     }
   }
+}
+
+TEST(DistanceIndex, ClosestPointIsTheExactMinimumOverAllTriangles) {
+  expect_exact_closest_points(test::sphere(3), 3);
+}
+
+TEST(DistanceIndex, ClosestPointIsExactAmongSliversAcrossTheAxes) {
+  expect_exact_closest_points(tilted_cone(400), 4);
 }
 
 TEST(DistanceIndex, RejectsMeshesItCannotMeasure) {
