@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -79,7 +80,8 @@ BENCHMARK(BM_QuerySamples)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 IndexedMesh fan_cone(Index segments) {
   IndexedMesh mesh;
   for (Index i = 0; i < 2 * segments; ++i) {
-    const double angle = 2 * M_PI * double(i % segments) / double(segments), radius = i < segments ? 1 : 0.01;
+    const double angle = 2 * std::numbers::pi * double(i % segments) / double(segments),
+                 radius = i < segments ? 1 : 0.01;
     mesh.positions.emplace_back(float(radius * std::cos(angle)), float(radius * std::sin(angle)),
                                 i < segments ? 0.0f : 2.0f);
   }

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <random>
 
 #include "ocsimp/core/error.h"
@@ -152,7 +153,7 @@ IndexedMesh tilted_cone(int segments) {
   for (int ring = 0; ring < 2; ++ring) {
     const float radius = ring == 0 ? 1.0f : 0.05f, z = ring == 0 ? -1.0f : 1.0f;
     for (int i = 0; i < segments; ++i) {
-      const float angle = 6.2831853f * float(i) / float(segments);
+      const float angle = 2 * std::numbers::pi_v<float> * float(i) / float(segments);
       mesh.positions.push_back(turn * Vec3f(radius * std::cos(angle), radius * std::sin(angle), z));
     }
   }
