@@ -86,9 +86,9 @@ namespace {
 // cylinder of 2,000 segments with fan caps 137, a cone of 5,000 segments 3,084).
 constexpr double kLooseBoxes = 8;
 
-// References a triangle may get in a build with spatial splits, relative to the triangle count (Embree's
-// own default, 1.2, left the cone above at 40 s; 8 brought it to 11.8 s, 32 gained nothing more and took
-// twice the memory).
+// References a triangle may get in a build with spatial splits, relative to the triangle count. Embree's own
+// default left the cone above at 40 s; 8 brought it to 11.8 s; 32 gained nothing more and took twice the
+// memory.
 constexpr int kSplitReplications = 8;
 
 void remember_embree_error(void* user, RTCError code, const char* message) {
