@@ -86,10 +86,17 @@ namespace {
 // cylinder of 2,000 segments with fan caps 137, a cone of 5,000 segments 3,084).
 constexpr double kLooseBoxes = 8;
 
-// References a triangle may get in a build with spatial splits, relative to the triangle count. Embree's own
-// default left the cone above at 40 s; 8 brought it to 11.8 s; 32 gained nothing more and took twice the
-// memory.
-constexpr int kSplitReplications = 8;
+// References a triangle may get in a build with spatial splits, relative to the triangle count: more
+// references, faster queries, more memory. Measured on cones of fan caps and side slivers, `compare` of the
+// mesh against itself with 100 k samples, against the Morton build's 434 s and 299 MB on 1 M triangles:
+//   replications   1 M-triangle cone    20 k-triangle cone (1 M samples against its decimation)
+//   2              250 s, 308 MB
+//   4              172 s, 495 MB
+//   8              132 s, 878 MB        11.8 s (Embree's own default: 40 s; 32: no faster, twice the memory)
+// So 8 up to kSplitManyTriangles, where the index costs at most about 0.9 GB; 2 above, which costs no more
+// memory than the Morton build and still queries 1.7 times as fast.
+constexpr int kSplitReplications = 8, kSplitReplicationsLarge = 2;
+constexpr std::size_t kSplitManyTriangles = std::size_t{1} << 20;
 
 void remember_embree_error(void* user, RTCError code, const char* message) {
   auto* impl = static_cast<DistanceIndex::Impl*>(user);
@@ -136,8 +143,10 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   if (impl.coordinate_scale > 1e18)
     throw Error(impl.name, {}, "coordinates beyond 1e18 are too large to measure distances on");
 
-  impl.device = rtcNewDevice(
-      ("verbose=0,max_spatial_split_replications=" + std::to_string(kSplitReplications)).c_str());
+  const int replications =
+      mesh.triangles.size() <= kSplitManyTriangles ? kSplitReplications : kSplitReplicationsLarge;
+  impl.device =
+      rtcNewDevice(("verbose=0,max_spatial_split_replications=" + std::to_string(replications)).c_str());
   if (!impl.device) throw_embree_error(impl, "creating a device");
   rtcSetDeviceErrorFunction(impl.device, remember_embree_error, &impl);
   impl.scene = rtcNewScene(impl.device);
@@ -193,9 +202,9 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   // across the axes (the fan caps and sides of a CAD cylinder or cone) defeat any BVH of whole triangles:
   // their boxes are mostly empty and overlap by the hundreds, and every query near them visits them all.
   // There the SAH build with spatial splits (references to clipped parts of a triangle, each with its own
-  // tight box; up to kSplitReplications references a triangle, see the device) pays for its slower build
-  // many times over: `ocsimp compare` of a 20 k-face cone of 5,000 segments against its decimation fell
-  // from 51.7 s to 11.8 s, and of an 80 k-face cylinder of 20,000 segments from 36.5 s to 7.2 s.
+  // tight box; see kSplitReplications) pays for its slower build many times over: `ocsimp compare` of a
+  // 20 k-face cone of 5,000 segments against its decimation fell from 51.7 s to 11.8 s, and of an 80 k-face
+  // cylinder of 20,000 segments from 36.5 s to 7.2 s.
   const bool loose = boxes > kLooseBoxes * impl.total_area();
   const RTCBuildQuality quality = loose ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_LOW;
   rtcSetGeometryBuildQuality(geometry, quality);
