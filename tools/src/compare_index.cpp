@@ -36,6 +36,11 @@ Vec3d nearer(const Vec3d& p, const Vec3d& x, const Vec3d& y) {
   return (x - p).squaredNorm() <= (y - p).squaredNorm() ? x : y;
 }
 
+// The box of a triangle's corners: what the index's leaves are culled by, and what decides its build.
+Box3 triangle_box(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  return {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)};
+}
+
 }  // namespace
 
 Vec3d closest_point_on_triangle(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
@@ -184,7 +189,8 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
       const Index* t = impl.corners + 3 * f;
       const Vec3d a = impl.vertex(t[0]), b = impl.vertex(t[1]), c = impl.vertex(t[2]);
       cumulative[f + 1] = 0.5 * (b - a).cross(c - a).norm();
-      const Vec3d e = a.cwiseMax(b).cwiseMax(c) - a.cwiseMin(b).cwiseMin(c);
+      const Box3 box = triangle_box(a, b, c);
+      const Vec3d e = box.hi - box.lo;
       box_area[chunk] += e.x() * e.y() + e.y() * e.z() + e.z() * e.x();
     }
   });
@@ -270,7 +276,8 @@ bool visit_triangle(RTCPointQueryFunctionArguments* args) {
   // Embree culls nodes, not the triangles of a leaf. The distance to the triangle's box is a lower bound that
   // rejects most of them for a fraction of the exact test; the relative slack keeps rounding from ever
   // rejecting a triangle that would tie or win.
-  const Vec3d below = a.cwiseMin(b).cwiseMin(c) - query.p, above = query.p - a.cwiseMax(b).cwiseMax(c);
+  const Box3 box = triangle_box(a, b, c);
+  const Vec3d below = box.lo - query.p, above = query.p - box.hi;
   const double box_d2 = below.cwiseMax(above).cwiseMax(0.0).squaredNorm();
   if (box_d2 > std::min(query.best.distance_squared, query.limit_squared) * (1 + 1e-12)) return false;
   const Vec3d point = closest_point_on_triangle(query.p, a, b, c);
