@@ -41,6 +41,13 @@ class HeaderParser {
 
   PlyHeader parse() {
     PlyHeader header;
+    // Lines that end in a CR alone would read as one long first line: say so rather than "no end_header".
+    const std::size_t start = reader_.fill(5);
+    if (start >= 4 && std::memcmp(reader_.data(), "ply\r", 4) == 0 &&
+        (start == 4 || reader_.data()[4] != '\n')) {
+      line_ = 1;
+      fail("the lines end in a carriage return alone (classic Mac OS); PLY needs LF or CR LF line endings");
+    }
     std::string_view line = next_line();
     if (line != "ply") fail("not a PLY file: the first line must be 'ply'");
     bool have_format = false;

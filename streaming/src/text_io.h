@@ -19,8 +19,9 @@
 
 namespace ocsimp::detail {
 
-// Splits the input into lines ("\n" or "\r\n"; a final line without terminator counts). A line must fit in
-// the reader's buffer: longer ones are an error rather than a reason to grow memory.
+// Splits the input into lines ("\n" or "\r\n", or "\r" alone as old Mac tools wrote, told by the first line
+// ending; a final line without terminator counts). A line must fit in the reader's buffer: longer ones are an
+// error rather than a reason to grow memory.
 class LineReader {
  public:
   explicit LineReader(ByteReader& reader) : reader_(reader) {}
@@ -30,12 +31,13 @@ class LineReader {
   bool next(std::string_view& line) {
     std::size_t available = reader_.available();
     if (available == 0 && (available = reader_.fill(1)) == 0) return false;
+    if (terminator_ == 0) available = choose_terminator();
     const char* data = reader_.data();
-    const char* newline = static_cast<const char*>(std::memchr(data, '\n', available));
+    const char* newline = static_cast<const char*>(std::memchr(data, terminator_, available));
     if (newline == nullptr) {
       available = reader_.fill(reader_.capacity());
       data = reader_.data();
-      newline = static_cast<const char*>(std::memchr(data, '\n', available));
+      newline = static_cast<const char*>(std::memchr(data, terminator_, available));
       if (newline == nullptr && available == reader_.capacity()) {
         throw Error(reader_.path(), FilePosition::line(line_ + 1),
                     "line longer than " + std::to_string(reader_.capacity()) + " bytes");
@@ -44,7 +46,7 @@ class LineReader {
     std::size_t length = newline ? static_cast<std::size_t>(newline - data) : available;
     reader_.consume(newline ? length + 1 : length);
     ++line_;
-    if (length > 0 && data[length - 1] == '\r') --length;
+    if (terminator_ == '\n' && length > 0 && data[length - 1] == '\r') --length;
     line = std::string_view(data, length);
     // A UTF-8 byte order mark before the first line (as some Windows editors write) is not part of it.
     if (line_ == 1 && line.starts_with("\xEF\xBB\xBF")) line.remove_prefix(3);
@@ -61,8 +63,22 @@ class LineReader {
   }
 
  private:
+  // Sets terminator_ from the first line ending in the buffer: a "\r" that no "\n" follows makes "\r" the
+  // terminator. Without this, a whole file of CR-only lines read as one line and failed at its first word
+  // with an error that did not say why. Returns the bytes available.
+  std::size_t choose_terminator() {
+    const std::size_t available = reader_.fill(reader_.capacity());
+    const char* data = reader_.data();
+    const char* newline = static_cast<const char*>(std::memchr(data, '\n', available));
+    const std::size_t first_line = newline ? static_cast<std::size_t>(newline - data) : available;
+    const char* cr = static_cast<const char*>(std::memchr(data, '\r', first_line));
+    terminator_ = cr != nullptr && cr + 1 != newline ? '\r' : '\n';
+    return available;
+  }
+
   ByteReader& reader_;
   std::uint64_t line_ = 0;
+  char terminator_ = 0;  // 0 until the first line is read
 };
 
 inline bool is_blank(char c) {

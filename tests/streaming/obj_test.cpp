@@ -199,6 +199,26 @@ TEST(Obj, ReportsTheLineOfAFaceError) {
   }
 }
 
+// Classic Mac OS ended lines with a CR alone; such a file reads like any other, and errors name the right
+// line.
+TEST(Obj, CarriageReturnAloneEndsALine) {
+  TempDir dir;
+  const IndexedMesh m = read_text(dir, "# old Mac\rv 0 0 0\rv 1 0 0\rv 0 1 0\rv 1 1 0\r\rf 1 2 3\rf 2 4 3");
+  EXPECT_EQ(m.vertex_count(), 4u);
+  EXPECT_EQ(m.positions[3], Vec3f(1, 1, 0));
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {1, 3, 2}}));
+
+  test::write_file_bytes(dir / "bad.obj", "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\rf 1 2 4\r");
+  try {
+    read_mesh(dir / "bad.obj");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.position().kind, FilePosition::Kind::line);
+    EXPECT_EQ(e.position().value, 5u);
+    EXPECT_NE(e.reason().find("vertex index 4 out of range"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Obj, RejectsALineLongerThanTheBuffer) {
   TempDir dir;
   std::string text = "v 0 0 0\nv 1 0 0\nv 0 1 0\n# ";

@@ -994,6 +994,7 @@ const Malformed kMalformed[] = {
     {"binary_big_endian_truncated.ply", "the file ends in record 1 of element face"},
     {"binary_truncated_unknown_element.ply", "the file ends in record 3 of element edge"},
     {"binary_header_garbage.ply", "without an end_header"},
+    {"cr_line_endings.ply", "end in a carriage return alone"},
 };
 
 std::string malformed_path(const std::string& name) {

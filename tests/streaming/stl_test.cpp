@@ -147,6 +147,17 @@ TEST(Stl, AsciiToleratesCaseBlanksLineEndingsAndSeveralSolids) {
   EXPECT_EQ(m.bounds().hi, Vec3d(1, 1.5, 0));
 }
 
+TEST(Stl, AsciiLinesMayEndInACarriageReturnAlone) {
+  test::TempDir dir;
+  test::write_file_bytes(
+      dir / "mac.stl",
+      "solid mac\rfacet normal 0 0 1\router loop\rvertex 0 0 0\rvertex 1 0 0\rvertex 0 1 0\r"
+      "endloop\rendfacet\rendsolid mac\r");
+  const IndexedMesh m = read_mesh(dir / "mac.stl");
+  EXPECT_EQ(m.face_count(), 1u);
+  EXPECT_EQ(m.positions[1], Vec3f(1, 0, 0));
+}
+
 TEST(Stl, AsciiPolygonFacetsSplitAcrossBatches) {
   TempDir dir;
   test::write_file_bytes(dir / "p.stl",
