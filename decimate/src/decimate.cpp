@@ -395,7 +395,9 @@ struct Decimator {
     stats.input_faces = nf;
     faces_alive = nf;
 
-    // Vertices: positions, then face counts; faces: corners. The input arrays go as soon as they are copied.
+    // Vertices: positions, then face counts; faces: corners. The input arrays go as soon as they are copied,
+    // except the positions: the loops over the faces here and in face_quadrics read them, 12 bytes a vertex,
+    // rather than the 128-byte records.
     // Chunks of a few thousand records: on a mesh of 35 k vertices and 70 k faces (bunny) larger ones left
     // one core with most of the work and of the first touches of the pages.
     verts.resize(nv);
@@ -413,7 +415,6 @@ struct Decimator {
         x.q = Quadric{};
       }
     });
-    std::vector<Vec3f>().swap(m.positions);
     normals = std::move(m.normals);
     colors = std::move(m.colors);
     uvs = std::move(m.uvs);
@@ -422,7 +423,7 @@ struct Decimator {
       for (std::size_t f = begin; f < end; ++f) {
         const Triangle& t = m.triangles[f];
         Face& face = faces[f];
-        auto at = [&](Index v) { return Vec3d(verts[v].p[0], verts[v].p[1], verts[v].p[2]); };
+        auto at = [&](Index v) { return m.positions[v].cast<double>(); };
         const Vec3d p0 = at(t[0]), p1 = at(t[1]), p2 = at(t[2]);
         const Vec3d n = (p1 - p0).cross(p2 - p0);
         const double sum = (p1 - p0).squaredNorm() + (p2 - p0).squaredNorm() + (p2 - p1).squaredNorm();
@@ -456,7 +457,8 @@ struct Decimator {
     key_scale = diagonal > 0 ? 1.0 / (diagonal * diagonal * diagonal) : 1.0;
 
     build_edges();
-    build_quadrics(in.quadrics);
+    build_quadrics(in.quadrics, m.positions);
+    std::vector<Vec3f>().swap(m.positions);
     if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
   }
 
@@ -577,33 +579,42 @@ struct Decimator {
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
   }
 
-  using PlaneTerm = decimate_detail::RawQuadric;  // a face's plane quadric
+  // A face's plane quadric in factored form: weight w, unnormalized normal n and offset d, so that the
+  // quadric is w (n n^T, n d, d^2). Half the bytes of the ten coefficients, and expanded the same way
+  // wherever it is added, so every vertex sums bit-identical terms. w == 0: a degenerate face, which adds
+  // nothing.
+  struct FacePlane {
+    double w, nx, ny, nz, d;
+  };
+
+  static void add_plane(Quadric& sum, const FacePlane& t) {
+    const double wx = t.w * t.nx, wy = t.w * t.ny, wz = t.w * t.nz;
+    add_to(sum, decimate_detail::RawQuadric{wx * t.nx, wx * t.ny, wx * t.nz, wy * t.ny, wy * t.nz, wz * t.nz,
+                                            wx * t.d, wy * t.d, wz * t.d, t.w * t.d * t.d});
+  }
 
   // Sums the area-weighted plane quadric of every face into its corners. Each face's plane is computed once
-  // (a vertex-by-vertex pass computes it at each of the three corners), in parallel over a block of faces;
-  // the sums are then added up in face order, so each vertex adds its faces in the order of its face list,
-  // whatever the thread count.
-  void face_quadrics() {
+  // (a vertex-by-vertex pass computes it at each of the three corners), in parallel; the sums are then added
+  // up in face order, so each vertex adds its faces in the order of its face list, whatever the thread count.
+  // `positions`: the input's, which build() keeps until here: 12 bytes a vertex against the 128-byte records,
+  // whose reads (one cache miss per corner on a mesh of 35 k vertices) were most of this step's time.
+  void face_quadrics(const std::vector<Vec3f>& positions) {
     const std::size_t nf = faces.size();
     constexpr std::size_t grain = 1024;
-    // Every face's plane at once (80 bytes each, freed before the edges' costs are computed), each vertex
-    // summing its own faces' planes through its face list, in face order as below: one pass over the corners
-    // instead of one per vertex range. Only when that array is big enough for the huge pages BigAllocator
-    // asks for, and up to 2^19 faces: smaller, it was fresh 4 KiB pages at every call, whose faults (about
-    // 1.6 us each on this VM) cost more than the blocks' repeated scans. This step, median of 5 runs: bunny
-    // (70 k faces) 7.9 -> 5.2 ms on one thread, horse (97 k) 6.5 -> 4.9 ms on two; igea (268 k, huge pages)
-    // took 26 ms in blocks against 10-14 ms at once.
-    constexpr std::size_t kAllTermsFaces = std::size_t{1} << 19;
-    const bool all_at_once =
-        nf <= kAllTermsFaces &&
-        nf * sizeof(PlaneTerm) >= decimate_detail::BigAllocator<PlaneTerm>::min_huge_bytes;
-    // Blocks of 8 Ki faces (640 KiB of planes, within a core's L2) for small meshes; 16 Ki above, where twice
-    // as many parallel loops measured slower (gen1M, median of 5: 58.8 ms in 16 Ki blocks, 61.8 in 8 Ki).
-    const std::size_t block = all_at_once            ? std::max<std::size_t>(nf, 1)
-                              : nf <= kAllTermsFaces ? 8192
-                                                     : 16384;
-    BigVector<PlaneTerm> terms(std::min(nf, block));
+    // Up to 2^19 faces, every face's plane at once (40 bytes each, freed before the edges' costs are
+    // computed), each vertex summing its own faces' planes through its face list. Above, blocks of 16 Ki
+    // faces (640 KiB of planes, within a core's L2), each task adding the block's planes to the vertices of
+    // its own range: the whole array would add 40 bytes per input face to the peak memory.
+    constexpr std::size_t kAllPlanesFaces = std::size_t{1} << 19;
+    const bool all_at_once = nf <= kAllPlanesFaces;
+    const std::size_t block = all_at_once ? std::max<std::size_t>(nf, 1) : 16384;
+    BigVector<FacePlane> planes(std::min(nf, block));
     const bool area = opt.area_weighting;
+    const Vec3d o = origin;
+    auto at = [&](Index v) {
+      const Vec3f& p = positions[v];
+      return Vec3d(double(p.x()) - o.x(), double(p.y()) - o.y(), double(p.z()) - o.z());  // as rel(v)
+    };
     // Two vertex ranges per core: every task scans the whole block, so more would only repeat that scan.
     const std::size_t nv = verts.size();
     const std::size_t ranges = 2 * std::max(1, tbb::this_task_arena::max_concurrency());
@@ -613,21 +624,13 @@ struct Decimator {
       parallel_chunks(count, grain, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
           const Face& f = faces[first + i];
-          const Vec3d p0 = rel(f.v[0]);
-          const Vec3d n = (rel(f.v[1]) - p0).cross(rel(f.v[2]) - p0);
+          const Vec3d p0 = at(f.v[0]);
+          const Vec3d n = (at(f.v[1]) - p0).cross(at(f.v[2]) - p0);
           const double length2 = n.squaredNorm();
-          PlaneTerm& t = terms[i];
-          if (!(length2 > 0)) {
-            t.c = -1;  // marks a degenerate face: it adds nothing (a real c is a square, never negative)
-            continue;
-          }
           // The plane of unit normal n / |n| weighted by the area |n| / 2 (or by 1), written on the
           // unnormalized n: one square root and one division per face.
-          const double w = area ? 0.5 / std::sqrt(length2) : 1.0 / length2;
-          const double d = -n.dot(p0);
-          const double wx = w * n.x(), wy = w * n.y(), wz = w * n.z();
-          t = {wx * n.x(), wx * n.y(), wx * n.z(), wy * n.y(), wy * n.z(),
-               wz * n.z(), wx * d,     wy * d,     wz * d,     w * d * d};
+          const double w = !(length2 > 0) ? 0.0 : area ? 0.5 / std::sqrt(length2) : 1.0 / length2;
+          planes[i] = {w, n.x(), n.y(), n.z(), -n.dot(p0)};
         }
       });
       if (all_at_once) {
@@ -636,8 +639,8 @@ struct Decimator {
             Vertex& x = verts[v];
             Quadric sum = x.q;
             for (Index i = x.seg_start; i < x.seg_start + x.seg_count; ++i) {
-              const PlaneTerm& t = terms[vf[i]];
-              if (t.c >= 0) add_to(sum, t);
+              const FacePlane& t = planes[vf[i]];
+              if (t.w != 0) add_plane(sum, t);
             }
             x.q = sum;
           }
@@ -647,17 +650,17 @@ struct Decimator {
       // Each task owns a range of vertices and adds only to those, so no two write the same record.
       parallel_chunks(nv, owned, [&](std::size_t low, std::size_t high) {
         for (std::size_t i = 0; i < count; ++i) {
-          const PlaneTerm& t = terms[i];
-          if (t.c < 0) continue;
+          const FacePlane& t = planes[i];
+          if (t.w == 0) continue;
           for (Index v : faces[first + i].v) {
-            if (v >= low && v < high) add_to(verts[v].q, t);
+            if (v >= low && v < high) add_plane(verts[v].q, t);
           }
         }
       });
     }
   }
 
-  void build_quadrics(std::vector<Quadric>& carried) {
+  void build_quadrics(std::vector<Quadric>& carried, const std::vector<Vec3f>& positions) {
     const std::size_t nv = verts.size();
     if (!carried.empty()) {
       // Re-express around the local origin o: Q(o + y) has the same A, gradient A o + b and constant Q(o).
@@ -675,7 +678,7 @@ struct Decimator {
       });
       std::vector<Quadric>().swap(carried);
     } else {
-      face_quadrics();
+      face_quadrics(positions);
     }
     std::sort(boundary_list.begin(), boundary_list.end());
     if (opt.lock_boundary) {
