@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "ocsimp/cluster/cluster.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/decimate/decimate.h"
@@ -65,6 +67,28 @@ TEST(Pipeline, NeverAboveTheTarget) {
   // The clustered intermediate need not be a closed manifold, so 2,001 may be reachable; above never.
   EXPECT_LE(result.mesh.face_count(), 2'001u);
   EXPECT_GE(result.mesh.face_count(), 2'000u);
+}
+
+// A multiple too large for the input asks for all of it; one that is not a number is refused. The product of
+// 1e30 and the target once overflowed the face count, and the octree was asked for 4 faces.
+TEST(Pipeline, AnIntermediateBeyondTheInputKeepsTheWholeInput) {
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 5'000, 1);
+  SimplifyOptions options;
+  options.target_faces = 100;
+  options.two_stage = true;
+  options.intermediate = 1e30;
+  const SimplifyResult result = simplify(path, options);
+  ASSERT_TRUE(result.clustered);
+  EXPECT_GT(result.intermediate_faces, 1'000u);
+  EXPECT_EQ(result.mesh.face_count(), 100u);
+  EXPECT_TRUE(result.decimate.target_reached) << result.decimate.reason;
+
+  for (double bad :
+       {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN(), 0.5}) {
+    options.intermediate = bad;
+    EXPECT_THROW(simplify(path, options), Error) << bad;
+  }
 }
 
 TEST(Pipeline, AnIntermediateBelowTheTargetIsReportedShort) {

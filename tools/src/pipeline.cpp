@@ -124,7 +124,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
             : std::clamp(std::floor(room / static_cast<double>(target)), 1.0, kMaxIntermediate);
     double faces = multiple * static_cast<double>(target);
     if (options.intermediate == 0) faces = std::max(faces, std::min(kMinIntermediate, room));
-    intermediate_faces = static_cast<std::uint64_t>(faces);
+    // Never more than the input (a multiple of 1e30 asks for all of it): the cast of a larger double
+    // overflowed, and the octree was then asked for its minimum of 4 faces.
+    intermediate_faces = static_cast<std::uint64_t>(std::min(faces, static_cast<double>(faces_hint)));
   } else {
     intermediate_faces = static_cast<std::uint64_t>(std::max(room, 1000.0));
   }
@@ -193,7 +195,8 @@ bool borders_carried(const FirstStage& stage, const ClusterOptions& cluster) {
 
 void check_common(const SimplifyOptions& options) {
   if (options.target_ratio < 0 || options.target_ratio > 1) throw Error("--ratio must be in (0, 1]");
-  if (options.intermediate != 0 && options.intermediate < 1) throw Error("--intermediate must be at least 1");
+  if (options.intermediate != 0 && !(options.intermediate >= 1 && std::isfinite(options.intermediate)))
+    throw Error("--intermediate must be a finite number of at least 1 (or 0: chosen from the memory limit)");
 }
 
 // The fields simplify() and lod() report alike, from the first stage.
