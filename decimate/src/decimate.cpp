@@ -2060,6 +2060,7 @@ struct Decimator {
     const std::uint64_t expected = expected_collapses();
     std::uint64_t done = 0;
     std::vector<float> sample;
+    std::vector<std::pair<std::size_t, std::size_t>> order;  // (expected work, region)
     for (int round = 0; round < kRounds; ++round) {
       float threshold = std::numeric_limits<float>::infinity();
       if (needed < std::numeric_limits<double>::infinity()) {
@@ -2082,12 +2083,27 @@ struct Decimator {
         std::nth_element(sample.begin(), at, sample.end());
         threshold = *at;
       }
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, regions, 1),
-          [&](const tbb::blocked_range<std::size_t>& range) {
-            for (std::size_t r = range.begin(); r < range.end(); ++r) workers[r]->run_region(threshold);
-          },
-          tbb::simple_partitioner());
+      // The regions in order of their expected work this round (sampled queued pairs at or below the
+      // threshold), largest first, taken by the threads as they free up: a long region then never starts
+      // last while the other threads idle. The order only schedules; each region's work is its own.
+      order.clear();
+      for (std::size_t r = 0; r < regions; ++r) {
+        const Decimator& w = *workers[r];
+        if (w.region_done() || w.heap.empty() || !(w.heap.top().key <= threshold)) continue;
+        std::size_t expected_work = 0;
+        for (std::size_t i = 0; i < w.heap.size(); i += 8) expected_work += w.heap.entry(i).key <= threshold;
+        order.emplace_back(expected_work, r);
+      }
+      std::sort(order.begin(), order.end(), [](const auto& x, const auto& y) {
+        return x.first != y.first ? x.first > y.first : x.second < y.second;
+      });
+      std::atomic<std::size_t> next{0};
+      const int lanes = static_cast<int>(
+          std::min<std::size_t>(order.size(), std::max(1, tbb::this_task_arena::max_concurrency())));
+      tbb::parallel_for(0, lanes, [&](int) {
+        for (std::size_t i = next++; i < order.size(); i = next++)
+          workers[order[i].second]->run_region(threshold);
+      });
       done = 0;
       for (const auto& w : workers) done += w->stats.collapses;
       report(opt.progress, "decimate", stats.collapses + done, std::max(expected, stats.collapses + done));
