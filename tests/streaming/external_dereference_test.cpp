@@ -108,9 +108,27 @@ TEST(ExternalDereference, BinaryAndAsciiPlyGiveTheInMemoryCorners) {
   // 100 vertices a partition: 38 partitions.
   expect_same_corners(binary, 1200);
   expect_same_corners(ascii, 1200);
-  // A budget below 12 bytes still holds one vertex.
+  // A budget below 12 bytes: partitions of a 64th of the vertices (see the next test).
   expect_same_corners(binary, 1);
   EXPECT_EQ(entries(work), 0u);
+}
+
+// Each partition costs a scan of the faces file, so however small the budget there are at most 64: with one
+// partition per 12 bytes of budget, a 3 M-triangle scan under a 1 KiB limit ran for minutes.
+TEST(ExternalDereference, ATinyBudgetTakesAtMost64Partitions) {
+  test::TempDir dir;
+  const std::string path = dir / "grid.ply";
+  write_mesh(path, shuffled_grid(60));  // 3,721 vertices
+  std::uint64_t partitions = 0;
+  ReadOptions options;
+  options.memory_budget = 12;
+  options.progress = [&](std::string_view phase, std::uint64_t, std::uint64_t total) {
+    if (phase == "dereference") partitions = total;
+  };
+  std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+  ASSERT_TRUE(dereferenced_out_of_core(*stream));
+  EXPECT_EQ(drain_corners(*stream).size(), 7'200u);
+  EXPECT_EQ(partitions, 64u);
 }
 
 TEST(ExternalDereference, ObjWithPolygonsAttributesAndRelativeIndices) {
