@@ -61,6 +61,8 @@ struct FirstStage {
   bool out_of_core = false;
   std::uint64_t input_faces = 0;
   std::uint64_t intermediate_faces = 0;
+  std::uint64_t cluster_target_faces = 0;  // what the clustering stage was asked for
+  bool intermediate_given = false;         // --intermediate, rather than the memory limit, set it
   std::vector<PhaseReport> phases;
   ClusterStats cluster;
   std::uint64_t memory_limit = 0;
@@ -158,6 +160,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.border_in_quadrics = cluster_options.preserve_boundary;
   cluster_options.carried_border_weight = options.decimate.boundary_weight;
   cluster_options.target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
+  stage.cluster_target_faces = cluster_options.target_faces;
+  stage.intermediate_given = options.intermediate > 0;
   cluster_options.fine_cells_per_target =
       fine_cells_for(static_cast<double>(cluster_options.target_faces), fine_per_vertex) /
       (static_cast<double>(cluster_options.target_faces) / 2);
@@ -220,8 +224,16 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
   stats.target_reached = false;
   stats.stop = DecimateStop::blocked;
   stats.reason = "stopped at " + std::to_string(stats.faces) + " faces (target " + std::to_string(target) +
-                 " faces): the clustering stage left only " + std::to_string(decimate_in) +
-                 " faces, as its grid merged whole small parts (a larger --intermediate keeps more)";
+                 " faces): the clustering stage left only " + std::to_string(decimate_in) + " faces, ";
+  if (stage.cluster_target_faces > target) {
+    stats.reason += "as its grid merged whole small parts (a larger --intermediate keeps more)";
+  } else {
+    // Clustering stops at the largest face count not above its own target: with no room above the final
+    // target, that is short of it whatever the mesh.
+    stats.reason += std::string("the largest count not above its own target, which ") +
+                    (stage.intermediate_given ? "--intermediate" : "the memory limit") +
+                    " kept at the final target (a larger one keeps more)";
+  }
 }
 
 }  // namespace
