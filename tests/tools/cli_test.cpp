@@ -282,6 +282,34 @@ TEST(Cli, AnUnwritableDestinationFailsBeforeAnyOutput) {
   }
 }
 
+// A --report path that names the command's own input or output used to be written over it: the mesh was lost
+// and the run exited 0.
+TEST(Cli, AReportThatWouldOverwriteAMeshIsRefused) {
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply", out = dir / "out.ply";
+  write_mesh(mesh, test::grid_square(8));
+  const std::string original = file_bytes(mesh);
+  const std::vector<std::string> commands = {
+      "cluster " + mesh + " -o " + out + " --grid 4 --report " + out,
+      "decimate " + mesh + " -o " + out + " --ratio 0.5 --report " + mesh,
+      "simplify " + mesh + " -o " + out + " --ratio 0.5 --report " + dir.path.string() + "/./out.ply",
+      "lod " + mesh + " -o " + (dir / "out_{faces}.ply") + " --faces 20,10 --report " + (dir / "out_10.ply"),
+      "compare " + mesh + " " + mesh + " --report " + mesh,
+  };
+  for (const std::string& command : commands) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << command;
+    EXPECT_EQ(lines(r.err), 1u) << command << "\n" << r.err;
+    EXPECT_NE(r.err.find("the report would overwrite the mesh file"), std::string::npos) << r.err;
+    EXPECT_EQ(file_bytes(mesh), original) << command;
+    for (const auto& entry : std::filesystem::directory_iterator(dir.path)) {
+      const std::string name = entry.path().filename().string();
+      EXPECT_TRUE(name == "in.ply" || name == "stdout.txt" || name == "stderr.txt")
+          << command << ": left " << name;
+    }
+  }
+}
+
 TEST(Cli, InterruptedGenLeavesNoFile) {
   test::TempDir dir;
   const std::string out = dir / "big.ply";

@@ -208,6 +208,20 @@ FileFormat check_mesh_destination(const std::string& path) {
   return format;
 }
 
+void check_report_destination(const std::string& report, const std::vector<std::string>& meshes) {
+  check_destination(report);
+  // The same file however it is spelled (./a.ply, a symbolic link); the output need not exist yet.
+  auto resolved = [](const std::string& path) {
+    std::error_code error;
+    const std::filesystem::path canonical = std::filesystem::weakly_canonical(path, error);
+    return error ? std::filesystem::absolute(path).lexically_normal() : canonical;
+  };
+  const std::filesystem::path target = resolved(report);
+  for (const std::string& mesh : meshes) {
+    if (resolved(mesh) == target) throw Error(report, {}, "the report would overwrite the mesh file " + mesh);
+  }
+}
+
 void write_json_report(const std::string& path, const nlohmann::json& report) {
   AtomicFile file(path);
   file.write(report.dump(2));

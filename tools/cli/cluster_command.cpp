@@ -64,7 +64,7 @@ void add_cluster_command(CLI::App& app) {
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
     check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
-    if (!flags->report.empty()) check_destination(flags->report);
+    if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
     ClusterOptions options = flags->options;
     options.preserve_boundary = !flags->no_boundary;
     options.representative = flags->representative == "mean"          ? Representative::mean

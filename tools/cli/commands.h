@@ -59,6 +59,10 @@ void check_destination(const std::string& path);
 // A mesh destination: its extension must name a format (returned), and check_destination must pass.
 FileFormat check_mesh_destination(const std::string& path);
 
+// check_destination for a --report path, which must also not name any of the command's mesh files: the
+// JSON would replace the result, or the input itself.
+void check_report_destination(const std::string& report, const std::vector<std::string>& meshes);
+
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
 

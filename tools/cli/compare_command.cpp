@@ -63,7 +63,7 @@ void add_compare_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
-    if (!flags->report.empty()) check_destination(flags->report);
+    if (!flags->report.empty()) check_report_destination(flags->report, {flags->original, flags->simplified});
     const auto limit = limit_threads(flags->threads);
     const ProgressFn progress = make_progress(flags->quiet);
     CompareOptions options = flags->options;

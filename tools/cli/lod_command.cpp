@@ -97,10 +97,12 @@ void add_lod_command(CLI::App& app) {
     options.level_faces = parse_levels(flags->faces);
     const bool several = options.level_faces.size() > 1;
     // Refuse a bad pattern or format before reading anything.
+    std::vector<std::string> meshes{flags->input};
     for (std::uint64_t faces : options.level_faces) {
-      check_mesh_destination(lod_level_path(flags->output, faces, several));
+      meshes.push_back(lod_level_path(flags->output, faces, several));
+      check_mesh_destination(meshes.back());
     }
-    if (!flags->report.empty()) check_destination(flags->report);
+    if (!flags->report.empty()) check_report_destination(flags->report, meshes);
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;

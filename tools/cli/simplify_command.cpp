@@ -80,7 +80,7 @@ void add_simplify_command(CLI::App& app) {
       throw Error("simplify: give --faces, --ratio or --max-error");
     }
     check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
-    if (!flags->report.empty()) check_destination(flags->report);
+    if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;
