@@ -286,10 +286,11 @@ struct Decimator {
         edges(s.edges),
         virtual_pairs(s.virtual_pairs) {}
 
-  Vec3d rel(Index v) const {
-    const float* p = verts[v].p;
+  // A position relative to the local origin, in double.
+  Vec3d rel(const float* p) const {
     return Vec3d(double(p[0]) - origin.x(), double(p[1]) - origin.y(), double(p[2]) - origin.z());
   }
+  Vec3d rel(Index v) const { return rel(verts[v].p); }
   bool face_alive(Index f) const { return faces[f].v[0] != kNone; }
   bool in_heap(Index e) const { return edges[e].slot < first_state; }
   bool edge_dead(Index e) const { return edges[e].slot == kDead; }
@@ -610,11 +611,7 @@ struct Decimator {
     const std::size_t block = all_at_once ? std::max<std::size_t>(nf, 1) : 16384;
     BigVector<FacePlane> planes(std::min(nf, block));
     const bool area = opt.area_weighting;
-    const Vec3d o = origin;
-    auto at = [&](Index v) {
-      const Vec3f& p = positions[v];
-      return Vec3d(double(p.x()) - o.x(), double(p.y()) - o.y(), double(p.z()) - o.z());  // as rel(v)
-    };
+    auto at = [&](Index v) { return rel(positions[v].data()); };
     // Two vertex ranges per core: every task scans the whole block, so more would only repeat that scan.
     const std::size_t nv = verts.size();
     const std::size_t ranges = 2 * std::max(1, tbb::this_task_arena::max_concurrency());
