@@ -9,7 +9,9 @@
 // of a corner file. next() then reads the index file once more and takes each corner's position from the
 // next unread record of its partition's region, so it delivers the faces in file order as triangle soups.
 //
-// Memory: the budget (one partition, or the read buffers of every partition) plus a few buffers. Disk under
+// Memory: the budget (one partition, or the read buffers of every partition) plus a few buffers; at most 64
+// partitions, as each costs a scan of the index file, so below a 64th of the vertex array the budget is
+// exceeded rather than the time growing without bound. Disk under
 // TMPDIR: 12 bytes a vertex + 12 bytes a triangle (indices) + 36 bytes a triangle (corners). The temporary
 // files are unlinked as soon as they are created, so nothing is left behind however the process ends.
 #pragma once
