@@ -336,6 +336,15 @@ struct Decimator {
       if (!m.positions[v].allFinite())
         throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite coordinate");
     }
+    // The attribute penalty reads them: a NaN there made every such collapse cost NaN.
+    for (std::size_t v = 0; v < m.normals.size(); ++v) {
+      if (!m.normals[v].allFinite())
+        throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite normal");
+    }
+    for (std::size_t v = 0; v < m.uvs.size(); ++v) {
+      if (!m.uvs[v].allFinite())
+        throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite texture coordinate");
+    }
     for (std::size_t f = 0; f < m.triangles.size(); ++f) {
       for (Index v : m.triangles[f]) {
         if (v >= n) {

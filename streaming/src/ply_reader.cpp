@@ -865,12 +865,21 @@ void PlyStream::load_vertices() {
 void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::uint64_t offset) {
   const Vec3d read(values.position[0], values.position[1], values.position[2]);
   // Beyond float's range a coordinate is refused wherever the origin falls (it never lies beyond that range).
-  if (!read.allFinite() || read.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max()) {
+  auto refuse = [&](const char* what) {
     const std::string reason =
-        "vertex " + std::to_string(index) + " has a coordinate that is not a finite float";
+        "vertex " + std::to_string(index) + " has " + what + " that is not a finite float";
     if (ascii_) fail(reason);
     fail_at_byte(offset, reason);
-  }
+  };
+  if (!read.allFinite() || read.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max())
+    refuse("a coordinate");
+  // Attributes too, as the OBJ and Draco readers refuse them: a NaN normal made every attribute-weighted
+  // collapse cost NaN, and the decimation order arbitrary.
+  if (vertex_plan_.normals && !(std::isfinite(values.normal[0]) && std::isfinite(values.normal[1]) &&
+                                std::isfinite(values.normal[2])))
+    refuse("a normal");
+  if (vertex_plan_.uvs && !(std::isfinite(values.uv[0]) && std::isfinite(values.uv[1])))
+    refuse("a texture coordinate");
   const FilePosition where = ascii_ ? FilePosition::line(line_) : FilePosition::byte(offset);
   if (!origin_sample_.settled) {
     // Also held in double until the origin is chosen from them.

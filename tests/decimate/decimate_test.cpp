@@ -1169,6 +1169,14 @@ TEST(Decimate, RejectsBadInputWithAClearError) {
   IndexedMesh short_normals = test::grid_square(2);
   short_normals.normals.resize(2);
   EXPECT_THROW(run(short_normals, faces(2)), Error);
+  IndexedMesh nan_normal = test::grid_square(2);
+  nan_normal.normals.assign(nan_normal.positions.size(), Vec3f(0, 0, 1));
+  nan_normal.normals[4].y() = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(run(nan_normal, faces(2)), Error);
+  IndexedMesh inf_uv = test::grid_square(2);
+  inf_uv.uvs.assign(inf_uv.positions.size(), Vec2f(0, 0));
+  inf_uv.uvs[0].x() = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(run(inf_uv, faces(2)), Error);
   try {
     run(bad, faces(2));
   } catch (const Error& e) {

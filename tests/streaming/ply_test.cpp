@@ -995,6 +995,8 @@ const Malformed kMalformed[] = {
     {"binary_truncated_unknown_element.ply", "the file ends in record 3 of element edge"},
     {"binary_header_garbage.ply", "without an end_header"},
     {"cr_line_endings.ply", "end in a carriage return alone"},
+    {"binary_nan_normal.ply", "vertex 1 has a normal that is not a finite float"},
+    {"ascii_inf_uv.ply", "vertex 2 has a texture coordinate that is not a finite float"},
 };
 
 std::string malformed_path(const std::string& name) {
