@@ -19,8 +19,8 @@
 
 namespace ocsimp::detail {
 
-// Splits the input into lines ("\n" or "\r\n", or "\r" alone as old Mac tools wrote, told by the first line
-// ending; a final line without terminator counts). A line must fit in the reader's buffer: longer ones are an
+// Splits the input into lines ("\n" or "\r\n", or "\r" alone as old Mac tools wrote, told from the first
+// buffer; a final line without terminator counts). A line must fit in the reader's buffer: longer ones are an
 // error rather than a reason to grow memory.
 class LineReader {
  public:
@@ -63,16 +63,15 @@ class LineReader {
   }
 
  private:
-  // Sets terminator_ from the first line ending in the buffer: a "\r" that no "\n" follows makes "\r" the
-  // terminator. Without this, a whole file of CR-only lines read as one line and failed at its first word
-  // with an error that did not say why. Returns the bytes available.
+  // Sets terminator_: "\r" when the first buffer holds a "\r" and no "\n" at all, else "\n". Without this, a
+  // whole file of CR-only lines read as one line and failed at its first word with an error that did not say
+  // why. Any "\n" keeps the usual rule, so a stray "\r" in an LF or CR LF file (or "\r\r\n" endings) reads
+  // as before. Returns the bytes available.
   std::size_t choose_terminator() {
     const std::size_t available = reader_.fill(reader_.capacity());
     const char* data = reader_.data();
-    const char* newline = static_cast<const char*>(std::memchr(data, '\n', available));
-    const std::size_t first_line = newline ? static_cast<std::size_t>(newline - data) : available;
-    const char* cr = static_cast<const char*>(std::memchr(data, '\r', first_line));
-    terminator_ = cr != nullptr && cr + 1 != newline ? '\r' : '\n';
+    const bool cr_only = std::memchr(data, '\n', available) == nullptr && std::memchr(data, '\r', available);
+    terminator_ = cr_only ? '\r' : '\n';
     return available;
   }
 

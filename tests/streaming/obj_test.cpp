@@ -208,6 +208,12 @@ TEST(Obj, CarriageReturnAloneEndsALine) {
   EXPECT_EQ(m.positions[3], Vec3f(1, 1, 0));
   EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {1, 3, 2}}));
 
+  // A stray CR in a file of LF lines, and CR CR LF endings, still read line by line at the LFs.
+  const IndexedMesh stray =
+      read_text(dir, "# made\rby hand\r\r\nv 0 0 0\r\r\nv 1 0 0\nv 0 1 0\r\nf 1 2 3\r\r\n");
+  EXPECT_EQ(stray.vertex_count(), 3u);
+  EXPECT_EQ(stray.triangles, (std::vector<Triangle>{{0, 1, 2}}));
+
   test::write_file_bytes(dir / "bad.obj", "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\rf 1 2 4\r");
   try {
     read_mesh(dir / "bad.obj");
