@@ -2095,10 +2095,11 @@ struct Decimator {
       order.clear();
       for (std::size_t r = 0; r < regions; ++r) {
         const Decimator& w = *workers[r];
-        if (w.region_done() || w.heap.empty() || !(w.heap.top().key <= threshold)) continue;
+        if (w.region_done()) continue;
+        // The sample starts at the top, so a region with nothing at or below the threshold counts 0.
         std::size_t expected_work = 0;
         for (std::size_t i = 0; i < w.heap.size(); i += 8) expected_work += w.heap.entry(i).key <= threshold;
-        order.emplace_back(expected_work, r);
+        if (expected_work > 0) order.emplace_back(expected_work, r);
       }
       std::sort(order.begin(), order.end(), [](const auto& x, const auto& y) {
         return x.first != y.first ? x.first > y.first : x.second < y.second;
