@@ -19,6 +19,20 @@ IndexedMesh read_text(const TempDir& dir, const std::string& text, const std::st
   return read_mesh(dir / name);
 }
 
+// Reading `text` must fail with one error at line `line` whose reason contains `reason`.
+void expect_error_at_line(const TempDir& dir, const std::string& text, std::uint64_t line,
+                          const std::string& reason) {
+  test::write_file_bytes(dir / "bad.obj", text);
+  try {
+    read_mesh(dir / "bad.obj");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.position().kind, FilePosition::Kind::line) << e.what();
+    EXPECT_EQ(e.position().value, line) << e.what();
+    EXPECT_NE(e.reason().find(reason), std::string::npos) << e.what();
+  }
+}
+
 TEST(Obj, RoundTripKeepsEveryAttributeExactly) {
   TempDir dir;
   const IndexedMesh mesh = test::attributed_sphere(3);
@@ -188,15 +202,8 @@ TEST(Obj, StreamsBatchesOfBoundedSize) {
 
 TEST(Obj, ReportsTheLineOfAFaceError) {
   TempDir dir;
-  test::write_file_bytes(dir / "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n# fine so far\nf 1 2 3\nf 1 2 4\n");
-  try {
-    read_mesh(dir / "bad.obj");
-    FAIL() << "no error";
-  } catch (const Error& e) {
-    EXPECT_EQ(e.position().kind, FilePosition::Kind::line);
-    EXPECT_EQ(e.position().value, 6u);
-    EXPECT_NE(e.reason().find("vertex index 4 out of range (the file has 3)"), std::string::npos) << e.what();
-  }
+  expect_error_at_line(dir, "v 0 0 0\nv 1 0 0\nv 0 1 0\n# fine so far\nf 1 2 3\nf 1 2 4\n", 6,
+                       "vertex index 4 out of range (the file has 3)");
 }
 
 // Classic Mac OS ended lines with a CR alone; such a file reads like any other, and errors name the right
@@ -214,15 +221,8 @@ TEST(Obj, CarriageReturnAloneEndsALine) {
   EXPECT_EQ(stray.vertex_count(), 3u);
   EXPECT_EQ(stray.triangles, (std::vector<Triangle>{{0, 1, 2}}));
 
-  test::write_file_bytes(dir / "bad.obj", "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\rf 1 2 4\r");
-  try {
-    read_mesh(dir / "bad.obj");
-    FAIL() << "no error";
-  } catch (const Error& e) {
-    EXPECT_EQ(e.position().kind, FilePosition::Kind::line);
-    EXPECT_EQ(e.position().value, 5u);
-    EXPECT_NE(e.reason().find("vertex index 4 out of range"), std::string::npos) << e.what();
-  }
+  expect_error_at_line(dir, "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\rf 1 2 4\r", 5,
+                       "vertex index 4 out of range");
 }
 
 TEST(Obj, RejectsALineLongerThanTheBuffer) {
@@ -230,14 +230,7 @@ TEST(Obj, RejectsALineLongerThanTheBuffer) {
   std::string text = "v 0 0 0\nv 1 0 0\nv 0 1 0\n# ";
   text.append(5u << 20, 'x');
   text += "\nf 1 2 3\n";
-  test::write_file_bytes(dir / "long.obj", text);
-  try {
-    read_mesh(dir / "long.obj");
-    FAIL() << "no error";
-  } catch (const Error& e) {
-    EXPECT_EQ(e.position().value, 4u);
-    EXPECT_NE(e.reason().find("line longer than"), std::string::npos) << e.what();
-  }
+  expect_error_at_line(dir, text, 4, "line longer than");
 }
 
 TEST(Obj, WriterRefusesBrokenMeshesAndLeavesNoFile) {
