@@ -1506,18 +1506,8 @@ struct Decimator {
     // Then up to kLargeFan more of the fan's faces, in its list's order, within the budget: a sample of the
     // far side, where a cone's apex moved to the rim turns faces over. Up to the whole budget (an eighth of
     // the fan), the pairs of a fanned disk's centre, refused or sent back at every change of the rim, each
-    // read thousands of faces here (40,000 rim vertices: 1.3 s at 10 %, against 0.3 s). The walk skips the
-    // faces the fan lost since it was last gathered (and packed), which became nearly the whole list where
-    // this settles every pair of the fan: packed once they are most of it, the skipping costs at most as
-    // much as the losses did.
+    // read thousands of faces here (40,000 rim vertices: 1.3 s at 10 %, against 0.3 s).
     budget = std::min<std::uint64_t>(budget, kLargeFan);
-    std::uint64_t listed = 0;
-    for (Index seg = big;;) {
-      listed += verts[seg].seg_count;
-      seg = verts[seg].seg_next;
-      if (seg == big) break;
-    }
-    if (listed > 2 * std::uint64_t{verts[big].live_faces}) gather_faces(big, scratch_faces);
     bool refused = false;
     all_live_faces(big, [&](Index g) {
       const Face& face = faces[g];
