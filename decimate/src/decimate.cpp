@@ -1131,20 +1131,33 @@ struct Decimator {
     return true;
   }
 
+  // The shapes of a set of moved faces, for the shape penalty: the worst quality after and before the move
+  // (kept squared, |n|^2 / sum^2, 1/12 for an equilateral triangle, so no square root per face) and the
+  // longest squared edge after it.
+  struct MovedShapes {
+    double worst2 = 1.0 / 12.0, before2 = 1.0 / 12.0, longest2 = 0;
+    void add(const MovedShape& m) {
+      if (m.sum > 0) worst2 = std::min(worst2, m.new2 / (m.sum * m.sum));
+      if (m.old_sum > 0) before2 = std::min(before2, m.old2 / (m.old_sum * m.old_sum));
+      longest2 = std::max(longest2, m.longest2);
+    }
+    double worst_quality() const { return std::sqrt(12 * worst2); }
+    double before_quality() const { return std::sqrt(12 * before2); }
+  };
+
   // Flip and degeneracy guard over every surviving face around a and b with the moved corner at p; also the
   // worst resulting triangle quality and longest squared edge, for the shape penalty.
   bool shapes_ok(Index a, Index b, const Vec3d& p, double* worst_quality, double* longest2) const {
-    double worst2 = 1.0 / 12.0, longest = 0;  // worst |n|^2 / sum^2; 1/12 is an equilateral triangle's
+    MovedShapes shapes;
     const bool ok =
         all_surviving_faces(a, b, [&](const Face& face, const Vec3d& p0, const Vec3d& p1, const Vec3d& p2) {
           MovedShape m;
           if (!keeps_shape(face, p0, p1, p2, p, &m)) return false;
-          if (m.sum > 0) worst2 = std::min(worst2, m.new2 / (m.sum * m.sum));
-          longest = std::max(longest, m.longest2);
+          shapes.add(m);
           return true;
         });
-    *worst_quality = std::sqrt(12 * worst2);
-    *longest2 = longest;
+    *worst_quality = shapes.worst_quality();
+    *longest2 = shapes.longest2;
     return ok;
   }
 
@@ -1441,18 +1454,13 @@ struct Decimator {
   // flip even where the link condition, checked first in try_top, would also refuse it.)
   //
   // The faces it reads also give a first shape penalty (see try_top), from them alone: `near` gets their
-  // worst quality after and before the move and their longest edge. Around a fan's centre, the worst slivers
+  // shapes (none read: no penalty). Around a fan's centre, the worst slivers
   // a move to the rim makes are beside the small end (its neighbours on the rim), so this penalty is what
   // sends such a pair back into the queue. Each collapse on the rim re-costs the centre's pair to it, and
   // when every return trip read the whole fan (the full penalty's faces), a disk fanned from one centre to
   // 20,000 rim vertices took 4.5 s at 10 %.
   static constexpr Index kLargeFan = 64;
-  struct NearShapes {
-    double worst2 = 1.0 / 12.0, before2 = 1.0 / 12.0;  // squared qualities over 12, as in shapes_ok
-    double longest2 = 0;
-    bool seen = false;
-  };
-  bool refused_beside_small_end(Index a, Index b, const Vec3d& p, bool overshoot, NearShapes* near) {
+  bool refused_beside_small_end(Index a, Index b, const Vec3d& p, bool overshoot, MovedShapes* near) {
     const bool a_small = verts[a].live_faces <= verts[b].live_faces;
     const Index small = a_small ? a : b, big = a_small ? b : a;
     // The budget keeps the pairs this does not refuse (where both ends are large, as in a soup of coincident
@@ -1478,10 +1486,7 @@ struct Decimator {
       MovedShape m;
       if (!keeps_shape(face, rel(moved), rel(face.v[(c + 1) % 3]), rel(face.v[(c + 2) % 3]), p, &m))
         return false;
-      if (m.sum > 0) near->worst2 = std::min(near->worst2, m.new2 / (m.sum * m.sum));
-      if (m.old_sum > 0) near->before2 = std::min(near->before2, m.old2 / (m.old_sum * m.old_sum));
-      near->longest2 = std::max(near->longest2, m.longest2);
-      near->seen = true;
+      near->add(m);
       return true;
     };
     for (Index f : scratch_faces) {
@@ -1546,15 +1551,13 @@ struct Decimator {
       return heap.top().edge != e;
     };
     if (std::max(verts[a].live_faces, verts[b].live_faces) > kLargeFan) {
-      NearShapes near;
+      MovedShapes near;
       if (refused_beside_small_end(a, b, pl.point, overshoot, &near)) {
         ++stats.rejected_flip;
         block(e, kBlockedFlip);
         return;
       }
-      if (near.seen && opt.shape_weight > 0 &&
-          requeued(sliver_penalty(trace(q), std::sqrt(12 * near.worst2), std::sqrt(12 * near.before2),
-                                  near.longest2)))
+      if (requeued(sliver_penalty(trace(q), near.worst_quality(), near.before_quality(), near.longest2)))
         return;
     }
     gather_faces(a, fa);
