@@ -1446,19 +1446,19 @@ struct Decimator {
   // A pair with one end on a large fan (a cone's apex, the centre of a CAD cylinder's cap of thousands of
   // segments) is refused, when it is, mostly at faces beside the small end: its own, and the fan's faces at
   // its neighbours, which moving the apex to the rim squeezes into slivers. Those are read first, found from
-  // the small end, then the rest of the fan in list order, all within a budget of an eighth of the fan's
-  // faces. Before, each refusal read the whole fan three times (gather, prefetch, shapes_ok): a double cone
-  // of two 50,000-face apexes took 47 s at 10 %, now 9.5 s. Only refusals are taken from here, the very ones
-  // shapes_ok would make; a pair that passes, or that the count targets would defer, goes on through
-  // try_top's whole check, so the output is unchanged. (With --preserve-topology, a refusal here counts as a
-  // flip even where the link condition, checked first in try_top, would also refuse it.)
+  // the small end, then a sample of the rest of the fan in list order, all within a budget of an eighth of
+  // the fan's faces. Before, each refusal read the whole fan three times (gather, prefetch, shapes_ok): a
+  // double cone of two 50,000-face apexes took 47 s at 10 %, now 9.5 s. The refusals taken here are the very
+  // ones shapes_ok would make; a pair that passes, or that the count targets would defer, goes on through
+  // try_top's whole check. (With --preserve-topology, a refusal here counts as a flip even where the link
+  // condition, checked first in try_top, would also refuse it.)
   //
   // The faces it reads also give a first shape penalty (see try_top), from them alone: `near` gets their
-  // shapes (none read: no penalty). Around a fan's centre, the worst slivers
-  // a move to the rim makes are beside the small end (its neighbours on the rim), so this penalty is what
-  // sends such a pair back into the queue. Each collapse on the rim re-costs the centre's pair to it, and
-  // when every return trip read the whole fan (the full penalty's faces), a disk fanned from one centre to
-  // 20,000 rim vertices took 4.5 s at 10 %.
+  // shapes (none read: no penalty). Around a fan's centre, the worst slivers a move to the rim makes are
+  // beside the small end (its neighbours on the rim), so this penalty is what sends such a pair back into the
+  // queue; the full check, when the pair comes up again, may raise it. Each collapse on the rim re-costs the
+  // centre's pair to it, and when every return trip read the whole fan (the full penalty's faces), a disk
+  // fanned from one centre to 20,000 rim vertices took 4.5 s at 10 %.
   static constexpr Index kLargeFan = 64;
   bool refused_beside_small_end(Index a, Index b, const Vec3d& p, bool overshoot, MovedShapes* near) {
     const bool a_small = verts[a].live_faces <= verts[b].live_faces;
