@@ -870,6 +870,31 @@ TEST(Cluster, SoupPassHalvesItsGridWhenCellsOutgrowTheTarget) {
   EXPECT_NEAR(soup_total.c, indexed_total.c, 1e-7 * indexed_total.c);
 }
 
+// A soup cannot refine its grid either: two spheres 200 radii apart fill a few cells of the grid sized
+// from their box. The result is as far from the target as before, but it says so.
+TEST(Cluster, SoupFarShortOfAFaceTargetSaysSo) {
+  IndexedMesh mesh = test::sphere(5);
+  const auto n = static_cast<Index>(mesh.positions.size());
+  const std::size_t faces = mesh.face_count();
+  for (Index v = 0; v < n; ++v) mesh.positions.push_back(mesh.positions[v] + Vec3f(400, 0, 0));
+  for (std::size_t f = 0; f < faces; ++f) {
+    const Triangle t = mesh.triangles[f];
+    mesh.triangles.push_back({t[0] + n, t[1] + n, t[2] + n});
+  }
+  for (bool octree : {false, true}) {
+    ClusterOptions options;
+    options.octree = octree;
+    options.target_faces = 2000;
+    ClusterStats indexed_stats, soup_stats;
+    const QuadricMesh indexed = run(mesh, options, &indexed_stats);
+    const QuadricMesh soup = run(mesh, options, &soup_stats, true);
+    EXPECT_TRUE(indexed_stats.target_met) << octree;
+    EXPECT_GE(indexed.mesh.face_count(), 1900u) << octree;
+    EXPECT_LT(soup.mesh.face_count(), 1000u) << octree;
+    EXPECT_FALSE(soup_stats.target_met) << octree;
+  }
+}
+
 TEST(Cluster, AttributesAreAveragedPerCell) {
   IndexedMesh mesh = test::grid_square(40);
   mesh.colors.assign(mesh.positions.size(), {10, 200, 30, 255});
