@@ -503,8 +503,9 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
   const double needed = static_cast<double>(options.needed_cells);
   int level = grid.level;
   // The coarsest level a refinement below allows: coarsening back under it would undo the refinement, and the
-  // two would take turns.
+  // two would take turns. And the cells counted before that refinement.
   int floor_level = 0;
+  double count_before_refining = 0;
   // Refinements stop after this many attempts (every level about twice over: no rule below should get
   // there). Then the loop can only coarsen, and a grid of one cell always fits, so it ends on a counted grid.
   constexpr int kMaxRefinements = 2 * kCoordBits + 4;
@@ -537,12 +538,16 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
     // cells and the same error.) A surface's cells grow about 4x per level, so below half the target the
     // next level is the nearer one, as above twice the target the coarser one is (the loop above, which
     // never coarsens back past a refinement). The first two refinements jump by the levels the shortfall
-    // suggests, later ones take one level at a time.
+    // suggests, later ones take one level at a time, and only while a level still at least doubles the
+    // cells: once they near one per distinct position, more levels add nothing (a mesh whose triangles each
+    // have their own three vertices fills about one cell per six vertices, under the quarter allowed here,
+    // and went on to the finest level, one pass over the vertices per level).
     // Separately, while there are fewer cells than the target needs, one level at a time until every vertex
     // has a cell of its own: parts much closer together than the surface is wide (two layers of a thin
     // shell) need many more levels. One level multiplies the cells by at most 8, which keeps the count under
     // the cap (8 x target, and target >= needed).
-    const bool few = count < target / 2 && count < positions.size() / 4.0;
+    const bool few =
+        count < target / 2 && count < positions.size() / 4.0 && count >= 2 * count_before_refining;
     const bool short_of_target = count < needed && count < positions.size();
     if ((few || short_of_target) && level < kCoordBits && attempt < kMaxRefinements) {
       const int step =
@@ -550,6 +555,7 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
               ? std::max(1, static_cast<int>(std::lround(std::log(target / count) / std::log(4.0))))
               : 1;
       floor_level = level + 1;
+      count_before_refining = count;
       level = std::min(kCoordBits, level + step);
       continue;
     }

@@ -428,6 +428,23 @@ TEST(Cluster, AFarUnusedPointDoesNotCoarsenTheFineGrid) {
   }
 }
 
+TEST(Cluster, FineGridStopsRefiningOnceCellsStopGrowing) {
+  // Triangles with their own three vertices each: a cell per distinct position is all the refining can
+  // give, which is short of half the cells a large target asks for. The refinement went on to the finest
+  // grid, one pass over the vertices per level; it now stops once a level no longer doubles the cells.
+  const IndexedMesh welded = test::sphere(6);
+  const IndexedMesh unwelded = test::triangle_soup(welded);
+  ClusterOptions options;
+  options.target_faces = 10000;
+  ClusterStats welded_stats, unwelded_stats;
+  const QuadricMesh a = run(welded, options, &welded_stats);
+  const QuadricMesh b = run(unwelded, options, &unwelded_stats);
+  EXPECT_EQ(unwelded_stats.fine_cells, welded_stats.fine_cells);
+  EXPECT_LE(unwelded_stats.fine_grid, 2 * welded_stats.fine_grid);
+  EXPECT_LE(b.mesh.face_count(), 10000u);
+  EXPECT_GE(b.mesh.face_count(), 9500u);
+}
+
 TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
   const IndexedMesh mesh = lumpy_sphere_with_holes();
   for (std::uint64_t faces : {200ull, 1500ull}) {
