@@ -79,6 +79,12 @@ double distance_to_mesh(const Vec3d& p, const IndexedMesh& mesh) {
 }
 
 // The indices of the border vertices of a mesh (on an edge used by one face).
+double farthest_off_unit_sphere(const IndexedMesh& mesh) {
+  double worst = 0;
+  for (const Vec3f& p : mesh.positions) worst = std::max(worst, std::abs(p.cast<double>().norm() - 1.0));
+  return worst;
+}
+
 std::vector<Index> border_vertices(const IndexedMesh& mesh) {
   std::map<std::pair<Index, Index>, int> uses;
   for (const Triangle& t : mesh.triangles)
@@ -162,10 +168,7 @@ TEST(Cluster, SphereRepresentativesLieOnTheSphere) {
   ASSERT_GT(quadric.mesh.vertex_count(), 500u);
   const double cell = stats.output_cell_size;
   EXPECT_NEAR(cell, 2.0 / 16, 1e-6);
-  double worst = 0;
-  for (const Vec3f& p : quadric.mesh.positions)
-    worst = std::max(worst, std::abs(p.cast<double>().norm() - 1.0));
-  EXPECT_LT(worst, 0.05 * cell);
+  EXPECT_LT(farthest_off_unit_sphere(quadric.mesh), 0.05 * cell);
   // As surfaces, the quadric's result is closer: the mean's vertices all sit inside the sphere, so its
   // chords do too.
   auto rms_to = [&](const IndexedMesh& out) {
@@ -419,12 +422,7 @@ TEST(Cluster, AFarUnusedPointDoesNotCoarsenTheFineGrid) {
     EXPECT_LE(out.mesh.face_count(), 3000u);
     EXPECT_GE(out.mesh.face_count(), 2900u) << octree;
     // The output stays as close to the sphere as without the point.
-    auto farthest_off_sphere = [](const IndexedMesh& mesh) {
-      double worst = 0;
-      for (const Vec3f& p : mesh.positions) worst = std::max(worst, std::abs(double(p.norm()) - 1.0));
-      return worst;
-    };
-    EXPECT_LT(farthest_off_sphere(out.mesh), 1.5 * farthest_off_sphere(clean.mesh)) << octree;
+    EXPECT_LT(farthest_off_unit_sphere(out.mesh), 1.5 * farthest_off_unit_sphere(clean.mesh)) << octree;
   }
 }
 
