@@ -79,6 +79,19 @@ double distance_to_mesh(const Vec3d& p, const IndexedMesh& mesh) {
 }
 
 // The indices of the border vertices of a mesh (on an edge used by one face).
+// The mesh and a copy of it moved by `shift`, the copy's faces turned over on request.
+IndexedMesh with_moved_copy(IndexedMesh mesh, const Vec3f& shift, bool reversed) {
+  const auto n = static_cast<Index>(mesh.vertex_count());
+  for (Index v = 0; v < n; ++v) mesh.positions.push_back(mesh.positions[v] + shift);
+  const std::size_t faces = mesh.face_count();
+  for (std::size_t f = 0; f < faces; ++f) {
+    const Triangle t = mesh.triangles[f];
+    mesh.triangles.push_back(reversed ? Triangle{t[0] + n, t[2] + n, t[1] + n}
+                                      : Triangle{t[0] + n, t[1] + n, t[2] + n});
+  }
+  return mesh;
+}
+
 double farthest_off_unit_sphere(const IndexedMesh& mesh) {
   double worst = 0;
   for (const Vec3f& p : mesh.positions) worst = std::max(worst, std::abs(p.cast<double>().norm() - 1.0));
@@ -366,14 +379,7 @@ TEST(Cluster, TargetsAreReachedOnPartsMuchCloserThanTheirWidth) {
   // Two layers of a thin shell, 1e-4 apart on a unit square: a surface spanning its box fills about 4x more
   // cells per grid level, but these layers share every cell until the cells are thinner than the gap. The
   // fine grid used to stop at the layers' shared cells (2601), short of both targets.
-  IndexedMesh shell = test::grid_square(50);
-  const Index n = static_cast<Index>(shell.vertex_count());
-  for (Index v = 0; v < n; ++v) shell.positions.push_back(shell.positions[v] + Vec3f(0, 0, 1e-4f));
-  const std::size_t faces = shell.face_count();
-  for (std::size_t f = 0; f < faces; ++f) {
-    const Triangle t = shell.triangles[f];
-    shell.triangles.push_back({t[0] + n, t[2] + n, t[1] + n});
-  }
+  const IndexedMesh shell = with_moved_copy(test::grid_square(50), Vec3f(0, 0, 1e-4f), true);
   ClusterStats stats;
   const QuadricMesh octree = run(shell, octree_options(3000), &stats);
   EXPECT_EQ(octree.mesh.vertex_count(), 3000u);
@@ -435,7 +441,7 @@ TEST(Cluster, FineGridStopsRefiningOnceCellsStopGrowing) {
   ClusterOptions options;
   options.target_faces = 10000;
   ClusterStats welded_stats, unwelded_stats;
-  const QuadricMesh a = run(welded, options, &welded_stats);
+  run(welded, options, &welded_stats);
   const QuadricMesh b = run(unwelded, options, &unwelded_stats);
   EXPECT_EQ(unwelded_stats.fine_cells, welded_stats.fine_cells);
   EXPECT_LE(unwelded_stats.fine_grid, 2 * welded_stats.fine_grid);
@@ -885,17 +891,10 @@ TEST(Cluster, SoupPassHalvesItsGridWhenCellsOutgrowTheTarget) {
   EXPECT_NEAR(soup_total.c, indexed_total.c, 1e-7 * indexed_total.c);
 }
 
-// A soup cannot refine its grid either: two spheres 200 radii apart fill a few cells of the grid sized
+// A soup cannot refine its grid either: two spheres 400 radii apart fill a few cells of the grid sized
 // from their box. The result is as far from the target as before, but it says so.
 TEST(Cluster, SoupFarShortOfAFaceTargetSaysSo) {
-  IndexedMesh mesh = test::sphere(5);
-  const auto n = static_cast<Index>(mesh.positions.size());
-  const std::size_t faces = mesh.face_count();
-  for (Index v = 0; v < n; ++v) mesh.positions.push_back(mesh.positions[v] + Vec3f(400, 0, 0));
-  for (std::size_t f = 0; f < faces; ++f) {
-    const Triangle t = mesh.triangles[f];
-    mesh.triangles.push_back({t[0] + n, t[1] + n, t[2] + n});
-  }
+  const IndexedMesh mesh = with_moved_copy(test::sphere(5), Vec3f(400, 0, 0), false);
   for (bool octree : {false, true}) {
     ClusterOptions options;
     options.octree = octree;
