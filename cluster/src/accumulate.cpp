@@ -356,12 +356,13 @@ class TriangleLog {
 };
 
 // Reads the next batch on one task while `work(batch)` (which runs its own parallel loops) handles the
-// current one.
-template <class Work>
-std::uint64_t run_batches(TriangleStream& stream, const ProgressFn& progress, Work&& work) {
+// current one. `first(batch)` sees the first batch before any work, while the stream has read nothing more.
+template <class First, class Work>
+std::uint64_t run_batches(TriangleStream& stream, const ProgressFn& progress, First&& first, Work&& work) {
   TriangleBatch current, next;
   std::uint64_t triangles = 0;
   bool have = stream.next(current);
+  if (have) first(current);
   while (have) {
     bool have_next = false;
     tbb::task_group reader;
@@ -380,6 +381,11 @@ std::uint64_t run_batches(TriangleStream& stream, const ProgressFn& progress, Wo
     have = have_next;
   }
   return triangles;
+}
+template <class Work>
+std::uint64_t run_batches(TriangleStream& stream, const ProgressFn& progress, Work&& work) {
+  return run_batches(
+      stream, progress, [](const TriangleBatch&) {}, work);
 }
 
 std::uint64_t demorton_bits(std::uint64_t v) {
@@ -426,7 +432,7 @@ class RecentCells {
 
 // Morton codes of the distinct cells of `positions`, ascending. False when more than `cap` (0: no cap) turn
 // up in one thread's share, which stops the count early.
-bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions, const Grid& grid,
+bool distinct_cells(const std::string& path, std::span<const Vec3f> positions, const Grid& grid,
                     std::size_t cap, std::vector<std::uint64_t>& codes) {
   // Each task dedupes its range of vertices in a small set that stays in cache, then hands the range's
   // Morton codes to its thread's list; a thread sorts and dedupes its list whenever it doubles. One big set
@@ -492,8 +498,12 @@ bool distinct_cells(const std::string& path, const std::vector<Vec3f>& positions
 }
 
 // Picks the grid (for target-driven modes, the power-of-two level) and returns its cells' Morton codes.
-std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vector<Vec3f>& positions,
-                                        const Box3& bounds, const PassOptions& options, Grid& grid) {
+// `points()`: the distinct points among `positions`, the most cells any grid can hold; asked only when the
+// cells fall short of the target.
+template <class Points>
+std::vector<std::uint64_t> choose_cells(const std::string& path, std::span<const Vec3f> positions,
+                                        Points&& points, const Box3& bounds, const PassOptions& options,
+                                        Grid& grid) {
   std::vector<std::uint64_t> codes;
   if (options.target_cells == 0 || grid.level < 0) {
     distinct_cells(path, positions, grid, 0, codes);
@@ -546,9 +556,8 @@ std::vector<std::uint64_t> choose_cells(const std::string& path, const std::vect
     // has a cell of its own: parts much closer together than the surface is wide (two layers of a thin
     // shell) need many more levels. One level multiplies the cells by at most 8, which keeps the count under
     // the cap (8 x target, and target >= needed).
-    const bool few =
-        count < target / 2 && count < positions.size() / 4.0 && count >= 2 * count_before_refining;
-    const bool short_of_target = count < needed && count < positions.size();
+    const bool few = count < target / 2 && count >= 2 * count_before_refining && count < points() / 4;
+    const bool short_of_target = count < needed && count < points();
     if ((few || short_of_target) && level < kCoordBits && attempt < kMaxRefinements) {
       const int step =
           few && attempt < 2
@@ -957,7 +966,9 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   FineCells cells;
   cells.grid = options.grid;
   cells.input_vertices = vertex_count;
-  std::vector<std::uint64_t> codes = choose_cells(stream.path(), positions, bounds, options, cells.grid);
+  std::vector<std::uint64_t> codes = choose_cells(
+      stream.path(), positions, [&] { return static_cast<double>(positions.size()); }, bounds, options,
+      cells.grid);
   const Grid grid = cells.grid;
   check_cell_count(codes.size());
   const std::size_t count = codes.size();
@@ -1392,21 +1403,69 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
   cells = std::move(parents);
 }
 
+// A target-driven soup pass's grid, refined on its first batch. The grid sized for a surface spanning the box
+// is too coarse for one that fills little of it (parts far apart, outlier points stretching the box): two
+// copies of bunny.stl 50 diagonals apart made 14 faces for --faces 5000. A soup has no vertex array to count
+// cells on, so the batch's corners stand in for it: they get the indexed pass's rule (choose_cells), for the
+// share of the target that the batch's share of the input would fill. Only refinements are taken; a grid too
+// fine for the whole input is coarsened by the pass as its cells outgrow the target, as before, while one too
+// coarse could only be refined by a second pass.
+Grid refine_on_first_batch(const TriangleStream& stream, const TriangleBatch& first, const Box3& bounds,
+                           const PassOptions& options, const Grid& grid) {
+  const std::span<const Vec3f> corners(first.corners.front().data(), 3 * first.corners.size());
+  for (const Vec3f& p : corners) {
+    if (!p.allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
+  }
+  // The input's triangles: the file says, or its size over the first batch's bytes does (ASCII STL).
+  const auto batch = static_cast<double>(first.corners.size());
+  double total = static_cast<double>(stream.triangles_hint());
+  if (total < batch) {
+    const auto read = static_cast<double>(stream.bytes_read());
+    total = read > 0 ? batch * static_cast<double>(stream.bytes_total()) / read : batch;
+  }
+  const double share = std::min(1.0, batch / total);
+  PassOptions scaled = options;
+  scaled.target_cells = std::max<std::uint64_t>(
+      1, static_cast<std::uint64_t>(std::llround(static_cast<double>(options.target_cells) * share)));
+  scaled.needed_cells =
+      static_cast<std::uint64_t>(std::llround(static_cast<double>(options.needed_cells) * share));
+  // A corner's position recurs in each of its triangles: its distinct positions are what the finest grid
+  // tells apart.
+  double points = -1;
+  auto count_points = [&] {
+    if (points < 0) {
+      std::vector<std::uint64_t> finest;
+      distinct_cells(stream.path(), corners, Grid::power_of_two(bounds, kCoordBits), 0, finest);
+      points = static_cast<double>(finest.size());
+    }
+    return points;
+  };
+  Grid chosen = grid;
+  choose_cells(stream.path(), corners, count_points, bounds, scaled, chosen);
+  return chosen.level > grid.level ? chosen : grid;
+}
+
 FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   FineCells cells;
   cells.grid = options.grid;
-  if (options.target_cells > 0 && cells.grid.level >= 0) {
-    // No vertex array to count cells on: size the grid so a surface spanning the box occupies about the
-    // target (a closed surface in its box occupies 1-5 x cells^2 cells).
+  const bool targeted = options.target_cells > 0 && cells.grid.level >= 0;
+  const Box3 bounds = stream.bounds();
+  if (targeted) {
+    // Sized so a surface spanning the box occupies about the target (a closed surface in its box occupies
+    // 1-5 x cells^2 cells); refined on the first batch below.
     const double side = std::sqrt(static_cast<double>(options.target_cells) / 2.0);
     const int level = std::clamp(static_cast<int>(std::ceil(std::log2(std::max(1.0, side)))), 0, kCoordBits);
-    cells.grid = Grid::power_of_two(stream.bounds(), level);
+    cells.grid = Grid::power_of_two(bounds, level);
   }
   Grid grid = cells.grid;
   SoupCells seen;
   TripleSet<CellKey> survivors;
   std::vector<SoupChunk> chunks;
-  cells.input_triangles = run_batches(stream, options.progress, [&](const TriangleBatch& batch) {
+  auto first = [&](const TriangleBatch& batch) {
+    if (targeted && !batch.corners.empty())
+      grid = refine_on_first_batch(stream, batch, bounds, options, grid);
+  };
+  cells.input_triangles = run_batches(stream, options.progress, first, [&](const TriangleBatch& batch) {
     if (!batch.triangles.empty()) {
       throw Error(stream.path(), {}, "a triangle soup stream delivered indexed triangles");
     }

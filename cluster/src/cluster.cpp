@@ -265,10 +265,8 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
   }
   stats.target_met = clustering.target_met;
   // Both merges count a face target as met when they reach the largest count the fine grid allows; a fine
-  // grid holding under half the faces asked for, from an input with more, is a miss whatever the merge does.
-  // An indexed pass refines until it has the cells, so in practice this is a soup, whose pass cannot refine
-  // (no vertex array to count cells on first): two copies of bunny.stl 50 diagonals apart gave 14 faces for
-  // --faces 5000 without a word.
+  // grid holding under half the faces asked for, from an input with more, is a miss whatever the merge does
+  // (an input whose faces repeat, whose distinct faces are fewer than the target).
   if (options.target_faces > 0 && cells.input_triangles > options.target_faces &&
       cells.triangles.size() < options.target_faces / 2) {
     stats.target_met = false;
