@@ -1,11 +1,18 @@
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
 
 #include "regroup.h"
 
 namespace ocsimp::cluster_detail {
 
-std::size_t count_faces(const CellTriangles& triangles, const std::vector<std::uint32_t>& cluster_of) {
-  TripleSet<std::uint32_t> set(triangles.size());
+std::size_t count_faces(const CellTriangles& triangles, const Clustering& clustering) {
+  // Sized for a closed surface's faces, about twice its vertices: sized for the fine triangles instead, the
+  // set was written whole on every step of regrid_to_faces's search, several times the distinct faces it
+  // holds (160 MB a step for a 10 M-triangle scan to 1 M faces).
+  TripleSet<std::uint32_t> set(2 * std::size_t{clustering.count});
+  const std::vector<std::uint32_t>& cluster_of = clustering.cluster_of;
   for (const CellTriangle& t : triangles) {
     const std::uint32_t a = cluster_of[t.first()], b = cluster_of[t.second()], c = cluster_of[t.third()];
     if (a != b && b != c && c != a) set.add(CellTriangle::of(a, b, c));
@@ -26,6 +33,9 @@ Clustering regrid(const FineCells& cells, double along) {
   result.cluster_of.resize(cells.size());
   CellMap ids(cells.size() / 4 + 16);
   const double scale = along / fine;
+  // Fine cells come in Morton order, so runs of them share a coarse cell: those skip the map.
+  CellKey last = kNoKey;
+  std::uint32_t last_id = 0;
   for (std::size_t i = 0; i < cells.size(); ++i) {
     const auto c = key_coords(cells.keys[i]);
     std::uint64_t coarse[3];
@@ -34,9 +44,14 @@ Clustering regrid(const FineCells& cells, double along) {
       const double t = (c[a] + 0.5) * scale;
       coarse[a] = std::min(top[a], static_cast<std::uint64_t>(t));
     }
-    bool inserted;
-    result.cluster_of[i] = ids.insert(make_key(coarse[0], coarse[1], coarse[2]), result.count, inserted);
-    if (inserted) ++result.count;
+    const CellKey key = make_key(coarse[0], coarse[1], coarse[2]);
+    if (key != last) {
+      bool inserted;
+      last = key;
+      last_id = ids.insert(key, result.count, inserted);
+      if (inserted) ++result.count;
+    }
+    result.cluster_of[i] = last_id;
   }
   return result;
 }
@@ -48,13 +63,30 @@ Clustering regrid_to_faces(const FineCells& cells, std::uint64_t target_faces) {
     all.target_met = true;
     return all;
   }
-  // Faces grow with the resolution, though not strictly. Bisect the (real) resolution for the boundary of
-  // the target, keeping the best count within it seen along the way.
+  // Faces grow with the resolution, though not strictly, about as a power of it (its square for a surface's
+  // cells much larger than its triangles, less near the fine grid). The search narrows a bracket [lo, hi] of
+  // the target's boundary, faces(lo) <= target < faces(hi), down to 1e-3 of the resolution, keeping the best
+  // count within the target seen along the way. Each step is a Newton step on faces ~ resolution^k from the
+  // last count (the fine grid's own triangles to start with; k = 2 until two counts give it), aimed a hair
+  // past the target on the far side of that count, so that once the estimate is good the next count lands
+  // across the boundary and closes the bracket. A step that would land outside the bracket, or that follows
+  // one which failed to halve how far its count missed the target (in log terms), takes the bracket's middle
+  // instead. Each step re-clusters every fine cell and counts every fine triangle; halving the bracket every
+  // time took 13 steps for a 10 M-triangle scan to 1 M faces, 4.4 s of the 7.9 s run, and now takes 5.
+  const auto target = static_cast<double>(target_faces);
   double lo = 1.0, hi = fine, best = 1.0;
   std::size_t best_faces = 0;
-  for (int step = 0; step < 40 && hi - lo > 1e-3 * lo; ++step) {
-    const double mid = 0.5 * (lo + hi);
-    const std::size_t faces = count_faces(cells.triangles, regrid(cells, mid).cluster_of);
+  double last = fine, last_faces = static_cast<double>(cells.triangles.size());
+  double miss = std::numeric_limits<double>::infinity(), slope = 2.0;
+  bool bisect = false;
+  for (int step = 0; step < 60 && hi - lo > 1e-3 * lo; ++step) {
+    double mid = 0.5 * (lo + hi);
+    if (!bisect) {
+      const double aim = last_faces > target ? 1.0 - 4e-4 : 1.0 + 4e-4;
+      const double newton = last * std::pow(target / last_faces, 1.0 / slope) * aim;
+      if (newton > lo && newton < hi) mid = newton;
+    }
+    const std::size_t faces = count_faces(cells.triangles, regrid(cells, mid));
     if (faces <= target_faces) {
       if (faces >= best_faces) {
         best = mid;
@@ -64,6 +96,17 @@ Clustering regrid_to_faces(const FineCells& cells, std::uint64_t target_faces) {
     } else {
       hi = mid;
     }
+    const double new_miss = std::abs(std::log(static_cast<double>(faces) / target));
+    bisect = !bisect && !(new_miss <= 0.5 * miss);
+    miss = new_miss;
+    // The local exponent from the last two counts (not the fine grid's: near it faces grow more slowly), when
+    // they are far enough apart for the counts' own jitter not to decide it.
+    const double exponent = std::log(static_cast<double>(faces) / last_faces) / std::log(mid / last);
+    if (step > 0 && std::abs(std::log(mid / last)) > 0.01 && exponent > 0) {
+      slope = std::clamp(exponent, 0.25, 4.0);
+    }
+    last = mid;
+    last_faces = static_cast<double>(faces);
   }
   Clustering result = regrid(cells, best);
   result.target_met = true;
