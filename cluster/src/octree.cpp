@@ -24,6 +24,7 @@
 #include <bit>
 #include <cmath>
 
+#include "ocsimp/core/big_vector.h"
 #include "place.h"
 #include "regroup.h"
 
@@ -175,6 +176,18 @@ struct Cluster {
   std::uint8_t octants = 0;   // the octants of its node it covers (neighbours: see `joined`)
   std::uint8_t slot = 0;      // which of the node's slots it fills
 };
+
+}  // namespace
+}  // namespace ocsimp::cluster_detail
+
+namespace ocsimp {
+// Cluster records are written in full by the loop that fills them (octree_merge).
+template <>
+inline constexpr bool filled_after_resize<cluster_detail::Cluster> = true;
+}  // namespace ocsimp
+
+namespace ocsimp::cluster_detail {
+namespace {
 
 // A triangle of three distinct cluster ids, ascending.
 struct Face {
@@ -359,7 +372,8 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   for (int l = 1; l <= levels; ++l)
     offset[l] = offset[l - 1] + static_cast<std::uint32_t>(prefix[l - 1].size());
   const std::size_t nodes = offset[levels];
-  std::vector<Node> node(nodes);
+  // The large arrays of the merge (about 190 bytes a fine cell in all) on huge pages: see BigVector.
+  BigVector<Node> node(nodes);
   std::vector<std::uint32_t> cell_node(n, kEnd);
   std::vector<std::uint8_t> cell_octant(n, 0), cell_slot(n, 0);
   for (int l = 1; l <= levels; ++l) {
@@ -412,13 +426,17 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
     v.pairs = pairs_total;
     pairs_total += std::uint64_t{v.children} * (v.children - 1) / 2;
   }
-  std::vector<Pair> pairs(pairs_total);
+  BigVector<Pair> pairs(pairs_total);  // each written before it is read (see pair_up)
 
   // Clusters start as the fine cells.
-  std::vector<Cluster> cluster(n);
+  BigVector<Cluster> cluster(n);  // filled in full here (filled_after_resize)
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    cluster[i].sums = cell_placement_sums(cells, i, boundary_weight);
-    cluster[i].error = place(cluster[i].sums, representative).error;
+    Cluster& c = cluster[i];
+    c.sums = cell_placement_sums(cells, i, boundary_weight);
+    c.error = place(c.sums, representative).error;
+    c.node = kEnd;
+    c.octants = 0;
+    c.slot = 0;
   });
   // The sums are added lower id first, as the merge itself adds them, so the pair holds the merge's error.
   auto pair_of = [&](std::uint32_t a, std::uint32_t b) {

@@ -59,8 +59,8 @@
 #include <string>
 #include <vector>
 
-#include "big_allocator.h"
 #include "edge_heap.h"
+#include "ocsimp/core/big_vector.h"
 #include "ocsimp/core/error.h"
 #include "placement.h"
 
@@ -69,7 +69,6 @@ namespace {
 
 using decimate_detail::add_pair;
 using decimate_detail::add_to;
-using decimate_detail::BigVector;
 using decimate_detail::EdgeHeap;
 using decimate_detail::first_state;
 using decimate_detail::HeapEntry;
@@ -133,7 +132,7 @@ static_assert(sizeof(Vertex) == 128);
 
 // build() writes every member of every vertex record (the face-list fields in build_face_lists).
 template <>
-inline constexpr bool decimate_detail::filled_after_resize<Vertex> = true;
+inline constexpr bool filled_after_resize<Vertex> = true;
 
 namespace {
 

@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-#include "big_allocator.h"
+#include "ocsimp/core/big_vector.h"
 
 namespace ocsimp::decimate_detail {
 
