@@ -1291,6 +1291,9 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
 
 // ---- Triangle soups --------------------------------------------------------------------------------------
 
+// What a soup pass says of a NaN or infinite corner, wherever it meets one first.
+constexpr const char* kNonFiniteCorner = "a triangle has a non-finite corner";
+
 // One chunk of a triangle soup: partial sums of the cells it touches, by cell key, and its surviving
 // triangles.
 struct SoupChunk {
@@ -1414,7 +1417,7 @@ Grid refine_on_first_batch(const TriangleStream& stream, const TriangleBatch& fi
                            const PassOptions& options, const Grid& grid) {
   const std::span<const Vec3f> corners(first.corners.front().data(), 3 * first.corners.size());
   for (const Vec3f& p : corners) {
-    if (!p.allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
+    if (!p.allFinite()) throw Error(stream.path(), {}, kNonFiniteCorner);
   }
   // The input's triangles: the file says, or its size over the first batch's bytes does (ASCII STL).
   const auto batch = static_cast<double>(first.corners.size());
@@ -1481,7 +1484,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
         CellKey key[3];
         for (int k = 0; k < 3; ++k) {
           const Vec3d p = corners[k].cast<double>();
-          if (!p.allFinite()) throw Error(stream.path(), {}, "a triangle has a non-finite corner");
+          if (!p.allFinite()) throw Error(stream.path(), {}, kNonFiniteCorner);
           Vec3d local;
           key[k] = grid.locate(p, local);
           const std::uint32_t s = chunk.slot(key[k]);
