@@ -1,12 +1,13 @@
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 
 #include "regroup.h"
 
 namespace ocsimp::cluster_detail {
+namespace {
 
+// Distinct triangles of three distinct clusters.
 std::size_t count_faces(const CellTriangles& triangles, const Clustering& clustering) {
   // Sized for a closed surface's faces, about twice its vertices: sized for the fine triangles instead, the
   // set was written whole on every step of regrid_to_faces's search, several times the distinct faces it
@@ -19,6 +20,8 @@ std::size_t count_faces(const CellTriangles& triangles, const Clustering& cluste
   }
   return set.size();
 }
+
+}  // namespace
 
 Clustering regrid(const FineCells& cells, double along) {
   const double fine = cells.grid.along_longest;  // a power of two

@@ -18,10 +18,6 @@ struct Clustering {
   double along_longest = 0;  // uniform re-clustering: the resolution chosen (cells along the longest axis)
 };
 
-
-// Distinct triangles of three distinct clusters.
-std::size_t count_faces(const CellTriangles& triangles, const Clustering& clustering);
-
 // The uniform grid of `along` (not necessarily whole) cells along the longest axis over the same box; a fine
 // cell joins the coarse cell holding its center. The fine grid must be a power-of-two grid.
 Clustering regrid(const FineCells& cells, double along);
