@@ -1415,6 +1415,7 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
 // coarse could only be refined by a second pass.
 Grid refine_on_first_batch(const TriangleStream& stream, const TriangleBatch& first, const Box3& bounds,
                            const PassOptions& options, const Grid& grid) {
+  static_assert(sizeof(std::array<Vec3f, 3>) == 3 * sizeof(Vec3f), "a batch's corners lie end to end");
   const std::span<const Vec3f> corners(first.corners.front().data(), 3 * first.corners.size());
   for (const Vec3f& p : corners) {
     if (!p.allFinite()) throw Error(stream.path(), {}, kNonFiniteCorner);
