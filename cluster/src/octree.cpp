@@ -441,12 +441,8 @@ Clustering octree_merge(const FineCells& cells, const OctreeTarget& target, Repr
   // Clusters start as the fine cells.
   BigVector<Cluster> cluster(n);  // filled in full here (filled_after_resize)
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    Cluster& c = cluster[i];
-    c.sums = cell_placement_sums(cells, i, boundary_weight);
-    c.error = place(c.sums, representative).error;
-    c.node = kEnd;
-    c.octants = 0;
-    c.slot = 0;
+    const PlacementSums sums = cell_placement_sums(cells, i, boundary_weight);
+    cluster[i] = Cluster{sums, place(sums, representative).error};  // the rest as Cluster defaults them
   });
   // The sums are added lower id first, as the merge itself adds them, so the pair holds the merge's error.
   auto pair_of = [&](std::uint32_t a, std::uint32_t b) {
