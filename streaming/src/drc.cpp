@@ -230,15 +230,18 @@ void add_float_attribute(draco::Mesh& mesh, draco::GeometryAttribute::Type type,
   }
 }
 
-// Draco quantizes positions and uvs over each axis's range, and that range is a float difference inside the
-// encoder: values spanning more than the largest float (say -2e38 to 2e38) overflow it, and the encoder then
-// crashed. (Normals are normalized first, so any finite ones encode.)
+// Draco quantizes positions and uvs over their range, the largest span of one component, a float difference
+// inside the encoder, with the scale (2^bits - 1) / range, a float too: values spanning more than the largest
+// float (say -2e38 to 2e38) overflow the range, values spanning too little (1e-34 at 16 bits) overflow the
+// scale. Either way the encoder wrote garbage or crashed. (Normals are normalized first, so any finite ones
+// encode; a zero range is Draco's own special case.)
 template <class Vec>
-void check_quantizable(const std::string& path, const char* what, const std::vector<Vec>& values) {
+void check_quantizable(const std::string& path, const char* what, const std::vector<Vec>& values, int bits) {
   auto text = [](float value) {
     char buffer[16];
     return std::string(buffer, print_float(buffer, value));
   };
+  float range = 0;
   for (int axis = 0; axis < Vec::RowsAtCompileTime && !values.empty(); ++axis) {
     float lo = values[0][axis], hi = lo;
     for (const Vec& v : values) {
@@ -252,6 +255,14 @@ void check_quantizable(const std::string& path, const char* what, const std::vec
               " along axis " + "xyz"[axis] +
               ", more than a float can hold, and Draco quantizes over that span (PLY or OBJ can hold them)");
     }
+    range = std::max(range, hi - lo);
+  }
+  const float steps = static_cast<float>((std::uint32_t{1} << bits) - 1);
+  if (range > 0 && !std::isfinite(steps / range)) {
+    throw Error(path, {},
+                std::string("cannot write Draco: the ") + what + " span only " + text(range) +
+                    ", too little for Draco's " + std::to_string(bits) +
+                    "-bit quantization, whose scale would overflow a float (PLY or OBJ can hold them)");
   }
 }
 
@@ -263,17 +274,18 @@ std::unique_ptr<TriangleStream> open_drc_stream(const std::string& path, const R
 
 void write_drc(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
   check_writable(path, mesh);
-  if (options.draco_position_bits < 1 || options.draco_position_bits > 30)
+  if (options.draco_position_bits < 1 || options.draco_position_bits > kMaxDracoPositionBits)
     throw Error(path, {},
-                "Draco position bits must be 1..30, not " + std::to_string(options.draco_position_bits));
+                "Draco position bits must be 1.." + std::to_string(kMaxDracoPositionBits) + ", not " +
+                    std::to_string(options.draco_position_bits));
   if (options.draco_compression_level < 0 || options.draco_compression_level > 10)
     throw Error(
         path, {},
         "Draco compression level must be 0..10, not " + std::to_string(options.draco_compression_level));
   if (mesh.triangles.empty()) throw Error(path, {}, "cannot write a Draco mesh without faces");
 
-  check_quantizable(path, "positions", mesh.positions);
-  if (mesh.has_uvs()) check_quantizable(path, "texture coordinates", mesh.uvs);
+  check_quantizable(path, "positions", mesh.positions, options.draco_position_bits);
+  if (mesh.has_uvs()) check_quantizable(path, "texture coordinates", mesh.uvs, kUvBits);
 
   draco::Mesh out;
   const std::size_t n = mesh.positions.size();

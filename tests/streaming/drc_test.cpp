@@ -115,7 +115,7 @@ TEST(Drc, StreamServesTheDecodedFacesInBatches) {
 TEST(Drc, RejectsBadOptionsWithoutWriting) {
   TempDir dir;
   const IndexedMesh mesh = test::cube(1);
-  for (auto [bits, level] : {std::pair{0, 7}, {31, 7}, {16, -1}, {16, 11}}) {
+  for (auto [bits, level] : {std::pair{0, 7}, {kMaxDracoPositionBits + 1, 7}, {16, -1}, {16, 11}}) {
     WriteOptions options;
     options.draco_position_bits = bits;
     options.draco_compression_level = level;
@@ -137,6 +137,22 @@ TEST(Drc, RefusesValuesSpanningMoreThanAFloat) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("along axis x"), std::string::npos) << e.what();
   }
+  // Too narrow a span overflows the quantization scale instead (the encoder wrote every vertex at one
+  // point, or crashed at level 10).
+  IndexedMesh narrow = test::sphere(2, 1e-35f);
+  try {
+    write_mesh(dir / "narrow.drc", narrow);
+    ADD_FAILURE() << "a mesh too narrow to quantize was written";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("too little"), std::string::npos) << e.what();
+  }
+  WriteOptions coarse;
+  coarse.draco_position_bits = 4;  // 15 / 2e-35 fits a float
+  write_mesh(dir / "narrow4.drc", narrow, coarse);
+  const IndexedMesh narrow_back = read_mesh(dir / "narrow4.drc");
+  EXPECT_LE(narrow_back.bounds().extent().maxCoeff(), 2.01e-35);
+  EXPECT_GE(narrow_back.bounds().extent().maxCoeff(), 1.99e-35);
+  std::filesystem::remove(dir / "narrow4.drc");
   IndexedMesh uvs = test::attributed_sphere(2);
   uvs.uvs[0].x() = -3e38f;
   uvs.uvs[1].x() = 3e38f;
