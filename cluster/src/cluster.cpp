@@ -228,7 +228,9 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
                                 : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
     const double fine = std::max(64.0, options.fine_cells_per_target * vertices);
     pass.target_cells = static_cast<std::uint64_t>(std::min(fine, 2e9));
-    pass.needed_cells = options.refine_to_reach ? static_cast<std::uint64_t>(std::min(vertices, 2e9)) : 0;
+    const double needed =
+        options.refine_until_cells > 0 ? static_cast<double>(options.refine_until_cells) : vertices;
+    pass.needed_cells = static_cast<std::uint64_t>(std::min({needed, vertices, 2e9}));
     pass.grid = Grid::power_of_two(bounds, level_for(fine));
   } else if (options.cell_size > 0) {
     pass.grid = Grid::sized(bounds, options.cell_size);

@@ -280,6 +280,41 @@ TEST(Pipeline, OutOfCoreReachesTheTargetDespiteAFarUnusedPoint) {
   EXPECT_LT(rms, 1.5 * rms_without);
 }
 
+TEST(Pipeline, TwoStageReachesTheTargetOnPartsFarApart) {
+  // Two small scans 5,000 diagonals apart: the box is almost empty, and the octree's fine grid, capped for
+  // speed and sized for the box, was refined only until its cells neared a quarter of the vertices. The
+  // intermediate came out with no faces, and so did the result.
+  test::TempDir dir;
+  const IndexedMesh part = read_mesh(write_scan(dir, 2'000));
+  IndexedMesh two = part;
+  const Box3 box = part.bounds();
+  const Vec3f shift = (5'000.0 * (box.hi - box.lo)).cast<float>();
+  for (const Vec3f& p : part.positions) two.positions.push_back(p + shift);
+  const auto n = static_cast<Index>(part.vertex_count());
+  for (const Triangle& t : part.triangles) two.triangles.push_back({t[0] + n, t[1] + n, t[2] + n});
+  const std::string path = dir / "two.ply";
+  write_mesh(path, two);
+  SimplifyOptions options;
+  options.target_faces = 200;
+  options.two_stage = true;
+  for (double intermediate : {1.0, 4.0}) {
+    options.intermediate = intermediate;
+    const SimplifyResult result = simplify(path, options);
+    EXPECT_TRUE(result.clustered) << intermediate;
+    // An intermediate of 1x the target is the largest count the octree reaches not above it.
+    EXPECT_GE(result.intermediate_faces, 190u) << intermediate;
+    EXPECT_GE(result.mesh.face_count(), 190u) << intermediate;
+    EXPECT_LE(result.mesh.face_count(), 200u) << intermediate;
+    // Both parts are there: about half the faces lie on each side.
+    std::size_t far = 0;
+    for (const Triangle& t : result.mesh.triangles) {
+      if (result.mesh.positions[t[0]].x() > box.hi.x() + 0.5 * shift.x()) ++far;
+    }
+    EXPECT_GT(far, 80u) << intermediate;
+    EXPECT_LT(far, 120u) << intermediate;
+  }
+}
+
 TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
   test::TempDir dir;
   const std::string path = write_scan(dir, 60'000, 2);

@@ -165,7 +165,10 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.fine_cells_per_target =
       fine_cells_for(static_cast<double>(cluster_options.target_faces), fine_per_vertex) /
       (static_cast<double>(cluster_options.target_faces) / 2);
-  cluster_options.refine_to_reach = false;  // the capped fine grid above is the point
+  // The capped fine grid above is the point, so the pass refines it only where it could not even give the
+  // decimator its final target (far-apart parts, a far stray point): then the intermediate came out empty.
+  cluster_options.refine_until_cells =
+      std::max<std::uint64_t>(1, target > 0 ? target : cluster_options.target_faces / 8);
   cluster_options.threads = static_cast<unsigned>(std::max(options.threads, 0));
   cluster_options.progress = options.progress;
   start = Clock::now();

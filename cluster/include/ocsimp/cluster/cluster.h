@@ -79,11 +79,12 @@ struct ClusterOptions {
   // Target-driven modes accumulate on a fine power-of-two grid of about this many occupied cells per
   // targeted output vertex (a face target counts as target_faces / 2 vertices), then merge.
   double fine_cells_per_target = 8;
-  // Target-driven modes on indexed input: refine the fine grid until it holds as many cells as the target
-  // needs (or one per vertex), so that thin shells and far-apart parts reach it too. The pipeline turns this
-  // off: its intermediate need not be exact, and the fine grid it caps for speed would grow 4x a level
-  // (a 10 M scan's two-stage run to 1 %: 2.3 s and 174 MB capped, 4.9 s and 562 MB refined, same result).
-  bool refine_to_reach = true;
+  // Target-driven modes: refine the fine grid until it holds at least this many cells (or one per distinct
+  // point), so that thin shells, far-apart parts and far stray points reach the target too; 0 means as many
+  // as the target has vertices. The pipeline asks for fewer: its intermediate need not be exact, and
+  // refining up to it would undo the cap that keeps the octree fast (a 10 M scan's two-stage run to 1 %:
+  // 2.3 s and 174 MB capped, 4.9 s and 562 MB refined, same result).
+  std::uint64_t refine_until_cells = 0;
 
   Representative representative = Representative::quadric;
 
