@@ -315,6 +315,41 @@ TEST(Pipeline, TwoStageReachesTheTargetOnPartsFarApart) {
   }
 }
 
+TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
+  // Out of core the intermediate is clustered to a size, not to an error: --max-error 0 let no collapse
+  // through, yet the output was the clustered intermediate, reported with a max_error of 0 and the target
+  // reached.
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 20'000);
+  SimplifyOptions options;
+  options.max_error = 0;
+  options.memory_limit = 256 << 10;
+  const SimplifyResult clustered = simplify(path, options);
+  ASSERT_TRUE(clustered.clustered);
+  EXPECT_LT(clustered.mesh.face_count(), 20'000u);
+  EXPECT_GT(clustered.cluster_error, 0.0);
+  EXPECT_EQ(clustered.max_error, clustered.cluster_error);
+  EXPECT_FALSE(clustered.decimate.target_reached);
+  EXPECT_NE(clustered.decimate.reason.find("--max-error"), std::string::npos) << clustered.decimate.reason;
+  // The error is of the clustered vertices: none lies farther from the original's surface than a few times
+  // it (it is an area-weighted RMS distance to the planes of its cell's triangles).
+  const IndexedMesh original = read_mesh(path);
+  const DistanceIndex index(original);
+  for (const Vec3f& p : clustered.mesh.positions) {
+    EXPECT_LE(std::sqrt(index.closest_point(p.cast<double>()).distance_squared), 4 * clustered.cluster_error);
+  }
+  // A bound the clustering meets is kept; in core there is no clustering error.
+  options.max_error = 2 * clustered.cluster_error;
+  const SimplifyResult within = simplify(path, options);
+  EXPECT_TRUE(within.decimate.target_reached) << within.decimate.reason;
+  EXPECT_LE(within.max_error, options.max_error);
+  options.memory_limit = 0;
+  const SimplifyResult in_core = simplify(path, options);
+  ASSERT_FALSE(in_core.clustered);
+  EXPECT_EQ(in_core.cluster_error, 0.0);
+  EXPECT_EQ(in_core.max_error, in_core.decimate.max_error);
+}
+
 TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
   test::TempDir dir;
   const std::string path = write_scan(dir, 60'000, 2);

@@ -24,7 +24,9 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   intermediate_faces  faces after clustering (0 when not clustered)
   memory_limit_bytes  the budget in force; peak_rss_bytes the process's peak resident memory
   seconds             wall time of the whole run
-  max_error           largest collapse cost applied, as a distance to the original surface in model units
+  max_error           the result's largest error as a distance to the original surface in model units: the
+                      largest collapse cost applied, or a clustered vertex's own error where larger
+  cluster_error       that error of the clustering stage's vertices alone (0 when not clustered)
   target_reached, stop, reason   how the decimator stopped (see ocsimp decimate)
   phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}] for open, read or
                       cluster, decimate and write, in order)";
@@ -109,7 +111,8 @@ void add_simplify_command(CLI::App& app) {
       report["memory_limit_bytes"] = result.memory_limit;
       report["peak_rss_bytes"] = peak_rss_bytes();
       report["seconds"] = total;
-      report["max_error"] = result.decimate.max_error;
+      report["max_error"] = result.max_error;
+      report["cluster_error"] = result.cluster_error;
       report["target_reached"] = result.decimate.target_reached;
       report["stop"] = stop_name(result.decimate.stop);
       report["reason"] = result.decimate.reason;
@@ -123,7 +126,7 @@ void add_simplify_command(CLI::App& app) {
       print_phase_table(result.phases);
       std::printf("%-14s %10.3f   %s -> %s: %zu faces, max error %.6g (distance)%s%s, peak RSS %s\n", "total",
                   total, flags->input.c_str(), flags->output.c_str(), result.mesh.face_count(),
-                  result.decimate.max_error, result.clustered ? ", clustered first" : "",
+                  result.max_error, result.clustered ? ", clustered first" : "",
                   result.out_of_core ? ", vertices dereferenced on disk" : "",
                   format_bytes(peak_rss_bytes()).c_str());
     }

@@ -206,10 +206,28 @@ void check_common(const SimplifyOptions& options) {
     throw Error("--intermediate must be a finite number of at least 1 (or 0: chosen from the memory limit)");
 }
 
+// The clustering stage's error, measured as the decimator measures a collapse (DecimateStats::max_error):
+// the largest over the intermediate's vertices of sqrt(Q(p) / trace(A)), each vertex's carried quadric at
+// its own position. A vertex no collapse takes keeps that error into the output. 0 when not clustered.
+double intermediate_error(const FirstStage& stage) {
+  if (!stage.clustered) return 0;
+  const QuadricMesh& m = stage.mesh;
+  double largest = 0;
+  for (std::size_t v = 0; v < m.quadrics.size(); ++v) {
+    const Quadric& q = m.quadrics[v];
+    const double weight = q.a00 + q.a11 + q.a22;
+    if (weight > 0)
+      largest = std::max(largest,
+                         std::sqrt(std::max(0.0, q.evaluate(m.mesh.positions[v].cast<double>())) / weight));
+  }
+  return largest;
+}
+
 // The fields simplify() and lod() report alike, from the first stage.
 template <class Result>
 void report_first_stage(FirstStage& stage, Result& result) {
   result.clustered = stage.clustered;
+  result.cluster_error = intermediate_error(stage);
   result.out_of_core = stage.out_of_core;
   result.input_faces = stage.input_faces;
   result.intermediate_faces = stage.intermediate_faces;
@@ -270,6 +288,19 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
+  result.max_error = std::max(result.cluster_error, result.decimate.max_error);
+  // The decimator kept its own collapses within the bound, but the intermediate it started from was
+  // clustered to a size, not to an error.
+  if (result.cluster_error > options.max_error) {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "the clustering stage's vertices already lie up to %.6g from the original's planes, over "
+                  "--max-error %.6g (an input that fits the memory limit, without --two-stage, is decimated "
+                  "directly)",
+                  result.cluster_error, options.max_error);
+    result.decimate.target_reached = false;
+    result.decimate.reason = text;
+  }
   result.phases.push_back(
       {"decimate", seconds_since(start), decimate_in, result.mesh.face_count(), peak_rss_bytes()});
   return result;
@@ -300,7 +331,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   report_first_stage(stage, result);
 
   QuadricMesh input = std::move(stage.mesh);
-  double max_error = 0;
+  double max_error = result.cluster_error;
   for (std::size_t i = 0; i < levels.size(); ++i) {
     const auto start = Clock::now();
     DecimateOptions decimate_options = options.decimate;

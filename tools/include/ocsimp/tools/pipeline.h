@@ -72,7 +72,13 @@ struct SimplifyResult {
   std::uint64_t intermediate_faces = 0;  // 0 when not clustered
   std::vector<PhaseReport> phases;
   ClusterStats cluster;
+  // The clustering stage's largest vertex error, measured as DecimateStats::max_error measures a collapse
+  // (0 when not clustered).
+  double cluster_error = 0;
   DecimateStats decimate;
+  // The largest error of the result as a distance to the original surface: the larger of cluster_error and
+  // the decimator's max_error.
+  double max_error = 0;
   std::uint64_t memory_limit = 0;  // the budget in force
   bool out_of_core = false;        // the input's vertices were dereferenced on disk (io.h, memory_budget)
 };
@@ -104,7 +110,8 @@ struct LodLevel {
   std::uint64_t faces = 0;
   double seconds = 0;  // decimating this level (and on_level)
   // Largest collapse cost so far down the chain, as a distance to the original surface in model units
-  // (DecimateStats::max_error, carried quadrics, maximum over this and every larger level).
+  // (DecimateStats::max_error, carried quadrics, maximum over this and every larger level, and over
+  // LodResult::cluster_error).
   double max_error = 0;
   DecimateStats decimate;  // this level's own run
 };
@@ -116,6 +123,7 @@ struct LodResult {
   std::uint64_t intermediate_faces = 0;
   std::vector<PhaseReport> phases;
   ClusterStats cluster;
+  double cluster_error = 0;  // as in SimplifyResult; every level's max_error starts from it
   std::uint64_t memory_limit = 0;
   bool out_of_core = false;
 };
