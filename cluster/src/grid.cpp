@@ -58,12 +58,17 @@ Grid Grid::sized(const Box3& bounds, double size) {
   if (!(size > 0.0) || !std::isfinite(size)) throw Error("cell size must be a positive number");
   const double length = longest(bounds);
   if (length / size > static_cast<double>(kMaxCellsPerAxis)) {
+    // The smallest size, rounded up to three digits: printed to %g's six, it could read the same as a
+    // refused size just below it, and typed back in it could fall short again.
+    const double smallest = length / static_cast<double>(kMaxCellsPerAxis);
+    const double unit = std::pow(10.0, std::floor(std::log10(smallest)) - 2);
+    const double shown = std::ceil(smallest / unit * (1 + 1e-12)) * unit;
     // %g: std::to_string's fixed six decimals print a small cell size as 0.000000.
     char text[160];
     std::snprintf(
         text, sizeof text,
-        "cell size %g gives more than %u cells along the longest axis (%g long); the smallest is %g", size,
-        static_cast<unsigned>(kMaxCellsPerAxis), length, length / static_cast<double>(kMaxCellsPerAxis));
+        "cell size %g gives more than %u cells along the longest axis (%g long); the smallest is %.3g", size,
+        static_cast<unsigned>(kMaxCellsPerAxis), length, shown);
     throw Error(text);
   }
   return make(bounds, size, kMaxCellsPerAxis);

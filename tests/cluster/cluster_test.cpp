@@ -1031,7 +1031,17 @@ TEST(Cluster, RejectsBadInputAndImpossibleOptions) {
     message = e.what();
   }
   EXPECT_NE(message.find("cell size 1e-09 "), std::string::npos) << message;
-  EXPECT_NE(message.find("the smallest is 4.76837e-07"), std::string::npos) << message;
+  // 1 / 2^21 = 4.76837158e-07, rounded up so that the size shown is allowed and differs from a refused one.
+  EXPECT_NE(message.find("the smallest is 4.77e-07"), std::string::npos) << message;
+  tiny.cell_size = 4.76837e-07;
+  try {
+    run(test::grid_square(4), tiny);
+    ADD_FAILURE() << "a cell size under 1 / 2^21 of the box was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("cell size 4.76837e-07 "), std::string::npos) << e.what();
+  }
+  tiny.cell_size = 4.77e-07;
+  EXPECT_EQ(run(test::grid_square(4), tiny).mesh.face_count(), test::grid_square(4).face_count());
   ClusterOptions zero;
   zero.grid = 0;
   EXPECT_THROW(run(test::grid_square(4), zero), Error);
