@@ -96,6 +96,9 @@ TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
       {"cluster in.ply -o out.ply --cell-size 0", "--cell-size: '0' is not a finite number > 0"},
       {"cluster in.ply -o out.ply --grid 10 --threads -1",
        "--threads: '-1' is not a whole number from 0 to 4096"},
+      // A budget of nothing was taken as the default (a third of RAM).
+      {"simplify in.ply -o out.ply --faces 10 --memory-limit 0", "--memory-limit: '0' is less than a byte"},
+      {"lod in.ply -o out.ply --faces 10 --memory-limit 0.5", "--memory-limit: '0.5' is less than a byte"},
   };
   for (const auto& c : cases) {
     const CommandResult r = run(c.args, dir);
@@ -417,11 +420,24 @@ TEST(Cli, SimplifyReportHasTheDocumentedFields) {
   EXPECT_EQ(r.out, "");
   EXPECT_EQ(read_mesh(dir / "out.obj").face_count(), 2000u);
   const nlohmann::json report = nlohmann::json::parse(file_bytes(dir / "report.json"));
-  const auto fields = {
-      "command",         "input",     "output",      "input_faces",        "output_faces",
-      "output_vertices", "clustered", "out_of_core", "intermediate_faces", "memory_limit_bytes",
-      "peak_rss_bytes",  "seconds",   "max_error",   "target_reached",     "stop",
-      "reason",          "phases"};
+  const auto fields = {"command",
+                       "input",
+                       "output",
+                       "input_faces",
+                       "output_faces",
+                       "output_vertices",
+                       "clustered",
+                       "out_of_core",
+                       "intermediate_faces",
+                       "memory_limit_bytes",
+                       "peak_rss_bytes",
+                       "seconds",
+                       "max_error",
+                       "cluster_error",
+                       "target_reached",
+                       "stop",
+                       "reason",
+                       "phases"};
   expect_keys(report, fields);
   EXPECT_EQ(report["output_faces"].get<std::uint64_t>(), 2000u);
   EXPECT_TRUE(report["clustered"].get<bool>());

@@ -119,6 +119,19 @@ CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
       wanted);
 }
 
+CLI::Validator byte_size() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        try {
+          if (parse_byte_size(text) == 0) return "'" + text + "' is less than a byte";
+        } catch (const Error& e) {
+          return e.reason();
+        }
+        return {};
+      },
+      "a size such as 2G, 512M or 100000 (bytes)");
+}
+
 CLI::Validator non_negative_number(bool or_infinity) {
   return number_check(or_infinity ? "a number >= 0 (or inf)" : "a finite number >= 0",
                       [or_infinity](double v) { return v >= 0 && (or_infinity || !std::isinf(v)); });

@@ -41,6 +41,8 @@ CLI::Validator positive_number();
 CLI::Validator fraction();
 // A --threads value: 0 (all cores) to 4096.
 CLI::Validator thread_count();
+// A memory size parse_byte_size() takes, of at least one byte ("0" and "0.5" meant the default before).
+CLI::Validator byte_size();
 
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.

@@ -75,7 +75,8 @@ void add_lod_command(CLI::App& app) {
                   "Face counts of the levels, comma-separated, e.g. 1000000,100000,10000")
       ->required();
   cmd->add_option("--memory-limit", flags->memory_limit,
-                  "Peak memory budget, e.g. 2G (default: a third of RAM)");
+                  "Peak memory budget, e.g. 2G (default: a third of RAM)")
+      ->check(byte_size());
   cmd->add_flag("--two-stage", o.two_stage,
                 "Cluster first even when the input fits in core (an input no larger than the intermediate is "
                 "decimated directly unless --intermediate is given)");

@@ -56,9 +56,10 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option("--max-error", o.max_error, "Largest collapse cost allowed, as a distance in model units")
       ->check(non_negative_number(true));
   cmd->add_option(
-      "--memory-limit", flags->memory_limit,
-      "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
-      "fit what clustering leaves of it (at least half) is dereferenced on disk under TMPDIR");
+         "--memory-limit", flags->memory_limit,
+         "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
+         "fit what clustering leaves of it (at least half) is dereferenced on disk under TMPDIR")
+      ->check(byte_size());
   cmd->add_flag("--two-stage", o.two_stage,
                 "Cluster first even when the input fits in core (an input no larger than the intermediate is "
                 "decimated directly unless --intermediate is given)");
