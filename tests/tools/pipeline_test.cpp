@@ -328,7 +328,7 @@ TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
   ASSERT_TRUE(clustered.clustered);
   EXPECT_LT(clustered.mesh.face_count(), 20'000u);
   EXPECT_GT(clustered.cluster_error, 0.0);
-  EXPECT_EQ(clustered.max_error, clustered.cluster_error);
+  EXPECT_EQ(clustered.max_error(), clustered.cluster_error);
   EXPECT_FALSE(clustered.decimate.target_reached);
   EXPECT_NE(clustered.decimate.reason.find("--max-error"), std::string::npos) << clustered.decimate.reason;
   // The error is of the clustered vertices: none lies farther from the original's surface than a few times
@@ -342,12 +342,12 @@ TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
   options.max_error = 2 * clustered.cluster_error;
   const SimplifyResult within = simplify(path, options);
   EXPECT_TRUE(within.decimate.target_reached) << within.decimate.reason;
-  EXPECT_LE(within.max_error, options.max_error);
+  EXPECT_LE(within.max_error(), options.max_error);
   options.memory_limit = 0;
   const SimplifyResult in_core = simplify(path, options);
   ASSERT_FALSE(in_core.clustered);
   EXPECT_EQ(in_core.cluster_error, 0.0);
-  EXPECT_EQ(in_core.max_error, in_core.decimate.max_error);
+  EXPECT_EQ(in_core.max_error(), in_core.decimate.max_error);
 }
 
 TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {

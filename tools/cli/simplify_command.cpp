@@ -112,7 +112,7 @@ void add_simplify_command(CLI::App& app) {
       report["memory_limit_bytes"] = result.memory_limit;
       report["peak_rss_bytes"] = peak_rss_bytes();
       report["seconds"] = total;
-      report["max_error"] = result.max_error;
+      report["max_error"] = result.max_error();
       report["cluster_error"] = result.cluster_error;
       report["target_reached"] = result.decimate.target_reached;
       report["stop"] = stop_name(result.decimate.stop);
@@ -127,7 +127,7 @@ void add_simplify_command(CLI::App& app) {
       print_phase_table(result.phases);
       std::printf("%-14s %10.3f   %s -> %s: %zu faces, max error %.6g (distance)%s%s, peak RSS %s\n", "total",
                   total, flags->input.c_str(), flags->output.c_str(), result.mesh.face_count(),
-                  result.max_error, result.clustered ? ", clustered first" : "",
+                  result.max_error(), result.clustered ? ", clustered first" : "",
                   result.out_of_core ? ", vertices dereferenced on disk" : "",
                   format_bytes(peak_rss_bytes()).c_str());
     }

@@ -288,7 +288,6 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
-  result.max_error = std::max(result.cluster_error, result.decimate.max_error);
   // The decimator kept its own collapses within the bound, but the intermediate it started from was
   // clustered to a size, not to an error.
   if (result.cluster_error > options.max_error) {

@@ -13,6 +13,7 @@
 // its quadrics carried, so every level's error is a distance to the original surface.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -78,7 +79,7 @@ struct SimplifyResult {
   DecimateStats decimate;
   // The largest error of the result as a distance to the original surface: the larger of cluster_error and
   // the decimator's max_error.
-  double max_error = 0;
+  double max_error() const { return std::max(cluster_error, decimate.max_error); }
   std::uint64_t memory_limit = 0;  // the budget in force
   bool out_of_core = false;        // the input's vertices were dereferenced on disk (io.h, memory_budget)
 };
