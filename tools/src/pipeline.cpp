@@ -167,6 +167,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       (static_cast<double>(cluster_options.target_faces) / 2);
   // The capped fine grid above is the point, so the pass refines it only where it could not even give the
   // decimator its final target (far-apart parts, a far stray point): then the intermediate came out empty.
+  // With an error bound alone, a quarter of the intermediate's vertices: a surface spanning its box gets
+  // at least kMinFinePerVertex cells a vertex, less what rounding to a whole level takes.
   cluster_options.refine_until_cells =
       std::max<std::uint64_t>(1, target > 0 ? target : cluster_options.target_faces / 8);
   cluster_options.threads = static_cast<unsigned>(std::max(options.threads, 0));
