@@ -849,7 +849,6 @@ struct Decimator {
   }
 
   static double trace(const decimate_detail::RawQuadric& q) { return q.a00 + q.a11 + q.a22; }
-  static double distance(double error, double weight) { return weight > 0 ? std::sqrt(error / weight) : 0.0; }
 
   // The queue's order. `cost` is a quadric error (plus penalties), area * distance^2 over `weight` =
   // trace(A), the area the pair stands for. Garland-Heckbert order by the cost itself, which favours removing
@@ -893,7 +892,8 @@ struct Decimator {
       *p = place_pair(*q, pa, pb, kReach);
     }
     const double weight = trace(*q);
-    if (opt.max_error < std::numeric_limits<double>::infinity() && distance(p->error, weight) > opt.max_error)
+    if (opt.max_error < std::numeric_limits<double>::infinity() &&
+        error_distance(p->error, weight) > opt.max_error)
       return kIdleError;
     double cost = p->error;
     if (opt.attribute_weight > 0) {
@@ -1646,7 +1646,7 @@ struct Decimator {
     Vertex& vk = vtx[k];
     Vertex& vr = vtx[r];
 
-    stats.max_error = std::max(stats.max_error, distance(pl.error, trace(q)));
+    stats.max_error = std::max(stats.max_error, error_distance(pl.error, trace(q)));
     interpolate_attributes(a, b, k, pl.point);
     const Vec3f placed = nearest_float(origin + pl.point);
     for (int a = 0; a < 3; ++a) vk.p[a] = placed[a];

@@ -217,10 +217,8 @@ double intermediate_error(const FirstStage& stage) {
   double largest = 0;
   for (std::size_t v = 0; v < m.quadrics.size(); ++v) {
     const Quadric& q = m.quadrics[v];
-    const double weight = q.a00 + q.a11 + q.a22;
-    if (weight > 0)
-      largest = std::max(largest,
-                         std::sqrt(std::max(0.0, q.evaluate(m.mesh.positions[v].cast<double>())) / weight));
+    largest = std::max(largest,
+                       error_distance(q.evaluate(m.mesh.positions[v].cast<double>()), q.a00 + q.a11 + q.a22));
   }
   return largest;
 }

@@ -21,6 +21,8 @@
 //   // result.stats.target_reached, result.stats.reason, result.stats.max_error
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -128,7 +130,7 @@ struct DecimateStats {
   // Q is the pair's summed quadric, p the placement and trace(A) the total weight of its planes (with area
   // weighting, the area of original surface the two vertices stand for, plus border and fold planes). It is
   // the area-weighted RMS distance from p to the planes of that surface, so an LOD pipeline can use it as a
-  // switching distance.
+  // switching distance. error_distance() below converts.
   double max_error = 0;
   // A count target was met (exactly, or one below for parity); with max_error alone, always true (decimation
   // went as far as the bound allows).
@@ -136,6 +138,12 @@ struct DecimateStats {
   DecimateStop stop = DecimateStop::exhausted;
   std::string reason;  // one line: why decimation stopped, with the counts reached
 };
+
+// A quadric error as the distance DecimateStats::max_error reports: sqrt(error / weight), with `weight` the
+// trace of the quadric's A, the area its planes stand for (0 for no weight; a rounding below 0 counts as 0).
+inline double error_distance(double error, double weight) {
+  return weight > 0 ? std::sqrt(std::max(0.0, error) / weight) : 0.0;
+}
 
 struct DecimateResult {
   IndexedMesh mesh;
