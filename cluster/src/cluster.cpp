@@ -233,12 +233,7 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
     pass.needed_cells = static_cast<std::uint64_t>(std::min({needed, vertices, 2e9}));
     pass.grid = Grid::power_of_two(bounds, level_for(fine));
   } else if (options.cell_size > 0) {
-    // The size is refused for this input's box: the message names the file.
-    try {
-      pass.grid = Grid::sized(bounds, options.cell_size);
-    } catch (const Error& e) {
-      throw Error(stream.path(), {}, e.reason());
-    }
+    pass.grid = Grid::sized(bounds, options.cell_size, stream.path());
   } else {
     pass.grid = Grid::uniform(bounds, options.grid);
   }

@@ -53,7 +53,7 @@ Grid Grid::uniform(const Box3& bounds, std::uint32_t cells) {
   return make(bounds, length / cells, cells);
 }
 
-Grid Grid::sized(const Box3& bounds, double size) {
+Grid Grid::sized(const Box3& bounds, double size, const std::string& file) {
   check_finite(bounds);
   if (!(size > 0.0) || !std::isfinite(size)) throw Error("cell size must be a positive number");
   const double length = longest(bounds);
@@ -69,7 +69,7 @@ Grid Grid::sized(const Box3& bounds, double size) {
         text, sizeof text,
         "cell size %g gives more than %u cells along the longest axis (%g long); the smallest is %.3g", size,
         static_cast<unsigned>(kMaxCellsPerAxis), length, shown);
-    throw Error(text);
+    throw Error(file, {}, text);
   }
   return make(bounds, size, kMaxCellsPerAxis);
 }

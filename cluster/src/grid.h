@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <string>
 
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -70,8 +71,9 @@ struct Grid {
 
   // `cells` cubes along the box's longest axis. Throws Error for a non-finite box.
   static Grid uniform(const Box3& bounds, std::uint32_t cells);
-  // Cubes of edge `size`. Throws Error when that makes more than 2^21 cells along an axis.
-  static Grid sized(const Box3& bounds, double size);
+  // Cubes of edge `size`. Throws Error naming `file` (the input the box is of) when that makes more than
+  // 2^21 cells along an axis.
+  static Grid sized(const Box3& bounds, double size, const std::string& file);
   // 2^level cubes along the longest axis; coarser() halves it, keeping every old cell inside one new cell.
   static Grid power_of_two(const Box3& bounds, int level);
   Grid coarser() const;
