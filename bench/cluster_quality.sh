@@ -9,8 +9,8 @@
 #   env: RATIOS (default 0.1,0.02,0.005), SAMPLES (default 1000000), RUNS (default 3), GENERATED (default
 #        10000000 triangles; 0 to skip), DATA (default ../shared/data), SWEEP (default 1)
 #
-# SWEEP=N measures each ratio r at N nearby ratios instead, r * 1.02^k for k = -N/2 .. N/2 - 1, and the
-# closing counts are over all of them. A Hausdorff distance is one worst place, and at a coarse grid it moves
+# SWEEP=N measures each ratio r at N nearby ratios instead, r * 1.02^k for N consecutive k starting at
+# -floor(N/2), and the closing counts are over all of them. A Hausdorff distance is one worst place, and at a coarse grid it moves
 # by tens of percent when the cell size changes by 2 % (a thin leg falls into one cell or two): a comparison
 # at a single cell size can go either way by chance, so SWEEP=8 shows how often each one holds.
 set -euo pipefail
@@ -24,11 +24,16 @@ RUNS=${RUNS:-3}
 GENERATED=${GENERATED:-10000000}
 
 SWEEP=${SWEEP:-1}
+if [[ ! $SWEEP =~ ^[1-9][0-9]*$ ]]; then
+  echo "cluster_quality.sh: SWEEP must be a count of ratios (1 or more), got '$SWEEP'" >&2
+  exit 2
+fi
 if ((SWEEP > 1)); then
   RATIOS=$(awk -v list="$RATIOS" -v n="$SWEEP" 'BEGIN {
     count = split(list, r, ",");
     for (i = 1; i <= count; ++i)
-      for (k = -int(n / 2); k < n - int(n / 2); ++k) out = out (out == "" ? "" : ",") sprintf("%.6g", r[i] * 1.02 ^ k);
+      for (k = -int(n / 2); k < n - int(n / 2); ++k)
+        out = out (out == "" ? "" : ",") sprintf("%.6g", r[i] * 1.02 ^ k);
     print out }')
 fi
 
