@@ -6,14 +6,14 @@
 # 1. Builds the `ocsimp` and `decimate_vs_meshopt` targets.
 # 2. Generates scan-like 1 M and 10 M triangle meshes with `ocsimp gen` under $TMPDIR (default /tmp).
 # 3. Runs both simplifiers in one process on bunny, horse and igea (../shared/data) and the generated meshes,
-#    to 10 % and 1 % of the faces: time of the call (RUNS runs alternating between the two, medians of the
-#    times and of the run-by-run ratios; one run for 10 M), two-sided RMS and Hausdorff distance to the
-#    original (SAMPLES area samples each way, plus vertices).
+#    to 10 % and 1 % of the faces (or RATIOS): time of the call (RUNS runs alternating between the two,
+#    medians of the times and of the run-by-run ratios; one run for 10 M), two-sided RMS and Hausdorff
+#    distance to the original (SAMPLES area samples each way, plus vertices).
 # 4. Runs `ocsimp decimate` on the 10 M mesh and prints its peak RSS per input triangle (the issue's limit is 150).
 # 5. Deletes the generated meshes.
 #
 # Environment: RUNS (default 3), SAMPLES (default 1000000), THREADS (default 0: all cores), DATA (default
-# <repo>/../shared/data), SKIP_10M=1 to leave out the 10 M mesh.
+# <repo>/../shared/data), RATIOS (the targets, default 0.1,0.01), SKIP_10M=1 to leave out the 10 M mesh.
 set -euo pipefail
 
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -21,6 +21,8 @@ build="${1:-$repo/build}"
 runs="${RUNS:-3}"
 samples="${SAMPLES:-1000000}"
 threads="${THREADS:-0}"
+ratio_args=()  # the bench's own default targets unless RATIOS is given
+[[ -n "${RATIOS:-}" ]] && ratio_args=(--ratios "$RATIOS")
 data="${DATA:-$repo/../shared/data}"
 work="$(mktemp -d "${TMPDIR:-/tmp}/decimate-bench.XXXXXX")"
 trap 'rm -rf "$work"' EXIT
@@ -40,9 +42,9 @@ meshes=()
 for name in bunny horse igea; do
   [[ -f "$data/$name.ply" ]] && meshes+=("$name=$data/$name.ply")
 done
-"$bench" --runs "$runs" --samples "$samples" --threads "$threads" "${meshes[@]}" "gen1m=$work/gen1m.ply"
+"$bench" --runs "$runs" --samples "$samples" --threads "$threads" "${ratio_args[@]}" "${meshes[@]}" "gen1m=$work/gen1m.ply"
 if [[ "${SKIP_10M:-0}" != 1 ]]; then
-  "$bench" --runs 1 --samples "$samples" --threads "$threads" "gen10m=$work/gen10m.ply" | tail -n +5
+  "$bench" --runs 1 --samples "$samples" --threads "$threads" "${ratio_args[@]}" "gen10m=$work/gen10m.ply" | tail -n +5
 
   echo
   echo "## memory: ocsimp decimate on the 10 M mesh to 1 %"
