@@ -265,8 +265,9 @@ struct Decimator {
   // Scratch, reused across collapses.
   std::uint32_t stamp_now = 0;
   std::vector<Index> fa, fb, dying, scratch_faces, scratch_ids;
-  BigVector<Neighbour> nbrs;  // grows without initialization (see collapse)
-  Index staged_edge = kNone;  // the pair whose neighbourhood the last collapse prefetched (see try_top)
+  std::vector<Index> opposites;  // of the dying faces, when there are many (see orphans_of_dying)
+  BigVector<Neighbour> nbrs;     // grows without initialization (see collapse)
+  Index staged_edge = kNone;     // the pair whose neighbourhood the last collapse prefetched (see try_top)
   std::vector<Index> deferred, blocked;
 
   std::uint64_t faces_alive = 0, verts_alive = 0, boundary_edges = 0;
@@ -514,13 +515,20 @@ struct Decimator {
           if (next > v) sides[n++] = {next, f, std::uint32_t(c)};
           if (prev > v) sides[n++] = {prev, f, std::uint32_t((c + 2) % 3)};
         }
-        // Insertion sort by w: a vertex has a handful of sides. The sort is stable and the face list is in
-        // face order (no collapse has run yet), so the sides of one edge stay in face order.
-        for (std::size_t i = 1; i < n; ++i) {
-          const UpperSide moving = sides[i];
-          std::size_t j = i;
-          for (; j > 0 && moving.w < sides[j - 1].w; --j) sides[j] = sides[j - 1];
-          sides[j] = moving;
+        // Sorted by w, stably: the face list is in face order (no collapse has run yet), so the sides of one
+        // edge stay in face order. Insertion sort for the handful of sides of nearly every vertex; a fan's
+        // centre or a non-manifold spine of thousands of faces takes the library's, as insertion sort was
+        // quadratic there (an OBJ polygon of 900,000 corners took minutes).
+        if (n > 32) {
+          std::stable_sort(sides.begin(), sides.begin() + n,
+                           [](const UpperSide& l, const UpperSide& r) { return l.w < r.w; });
+        } else {
+          for (std::size_t i = 1; i < n; ++i) {
+            const UpperSide moving = sides[i];
+            std::size_t j = i;
+            for (; j > 0 && moving.w < sides[j - 1].w; --j) sides[j] = sides[j - 1];
+            sides[j] = moving;
+          }
         }
         const Index first = id;
         for (std::size_t i = 0; i < n; ++id) {
@@ -1408,22 +1416,39 @@ struct Decimator {
     }
   }
 
-  // Vertices left without faces by the collapse of (a, b): the opposite corners of `dying` that were all the
-  // faces they had.
-  std::uint64_t orphans_of_dying(Index a, Index b) const {
+  // The vertices the collapse of (a, b) leaves without faces: opposite corners of the dying faces whose every
+  // live face dies. Each dying face has one opposite corner, so a corner's dying faces are the dying faces
+  // naming it. Up to a few faces (every manifold edge) they are counted pairwise; beyond, from a sorted copy:
+  // pairwise on an edge of 300,000 duplicate faces took minutes.
+  std::uint64_t orphans_of_dying(Index a, Index b) {
+    auto opposite = [&](Index f) {
+      const Face& t = faces[f];
+      return t.v[0] != a && t.v[0] != b ? t.v[0] : t.v[1] != a && t.v[1] != b ? t.v[1] : t.v[2];
+    };
     std::uint64_t orphans = 0;
-    for (std::size_t i = 0; i < dying.size(); ++i) {
-      const Face& t = faces[dying[i]];
-      const Index c = t.v[0] != a && t.v[0] != b ? t.v[0] : t.v[1] != a && t.v[1] != b ? t.v[1] : t.v[2];
-      Index count = 0;
-      bool first = true;
-      for (std::size_t j = 0; j < dying.size(); ++j) {
-        if (has_corner(faces[dying[j]], c)) {
-          ++count;
-          if (j < i) first = false;
+    if (dying.size() <= 8) {
+      for (std::size_t i = 0; i < dying.size(); ++i) {
+        const Index c = opposite(dying[i]);
+        Index count = 0;
+        bool first = true;
+        for (std::size_t j = 0; j < dying.size(); ++j) {
+          if (opposite(dying[j]) == c) {
+            ++count;
+            if (j < i) first = false;
+          }
         }
+        if (first && verts[c].live_faces == count) ++orphans;
       }
-      if (first && verts[c].live_faces == count) ++orphans;
+      return orphans;
+    }
+    opposites.resize(dying.size());
+    std::transform(dying.begin(), dying.end(), opposites.begin(), opposite);
+    std::sort(opposites.begin(), opposites.end());
+    for (std::size_t i = 0; i < opposites.size();) {
+      std::size_t j = i;
+      while (j < opposites.size() && opposites[j] == opposites[i]) ++j;
+      if (verts[opposites[i]].live_faces == j - i) ++orphans;
+      i = j;
     }
     return orphans;
   }
@@ -1473,8 +1498,7 @@ struct Decimator {
     for (Index f : scratch_faces) {
       if (has_corner(faces[f], big)) dying.push_back(f);
     }
-    // More than two faces on the pair's edge (a soup, a non-manifold fan): left to try_top, which counts its
-    // orphans itself, in time quadratic in those faces.
+    // More than two faces on the pair's edge (a soup, a non-manifold fan): left to try_top's whole check.
     if (dying.size() > 2) return false;
     const std::uint64_t kf = dying.size(), orphans = orphans_of_dying(a, b);
     const bool pair_orphaned = std::uint64_t{verts[a].live_faces} + verts[b].live_faces == 2 * kf;

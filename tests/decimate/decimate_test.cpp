@@ -38,6 +38,20 @@ long euler_characteristic(const IndexedMesh& m) {
          static_cast<long>(m.face_count());
 }
 
+// `pages` triangles on the edge from the origin to (0, 0, spine), one to each of `pages` points spread
+// around the unit circle at half the spine's height: a non-manifold fan.
+IndexedMesh book(Index pages, float spine) {
+  IndexedMesh mesh;
+  mesh.positions = {{0, 0, 0}, {0, 0, spine}};
+  for (Index i = 0; i < pages; ++i) {
+    const double angle = 2 * M_PI * i / pages;
+    mesh.positions.emplace_back(static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle)),
+                                spine / 2);
+    mesh.triangles.push_back({0, 1, i + 2});
+  }
+  return mesh;
+}
+
 // A closed torus (genus 1, Euler characteristic 0) of n x m quads, outward facing.
 IndexedMesh torus(int n, int m) {
   IndexedMesh mesh;
@@ -237,20 +251,31 @@ TEST(Decimate, CountsNeverFallMoreThanParityAllows) {
   }
 }
 
+TEST(Decimate, AnEdgeOfManyFacesCountsTheVerticesItsCollapseLeavesAlone) {
+  // A book of 30 pages on a short spine, the first 12 pages twice over (duplicate faces) and one three
+  // times: the spine is the cheapest pair, and collapsing it takes every face and leaves every tip without
+  // one, each counted once however many of the spine's faces it is on. Every vertex target must be met
+  // exactly or reported blocked, never passed.
+  IndexedMesh pages = book(30, 0.001f);
+  for (Index i = 0; i < 12; ++i) pages.triangles.push_back({1, 0, i + 2});
+  pages.triangles.push_back({0, 1, 30});
+  for (std::uint64_t target : {1u, 2u, 3u, 5u, 17u, 31u}) {
+    DecimateOptions o;
+    o.target_vertices = target;
+    const DecimateResult r = run(pages, o);
+    EXPECT_EQ(analyze_topology(r.mesh).unreferenced_vertices, 0u);
+    EXPECT_GE(r.mesh.vertex_count(), target);
+    EXPECT_EQ(r.mesh.vertex_count() == target, r.stats.stop == DecimateStop::target_reached)
+        << target << ": " << r.stats.reason;
+  }
+}
+
 TEST(Decimate, AFanOfThousandsIsNotRecheckedAtEveryCollapse) {
   // 2,000 triangles on one edge: every collapse next to its ends used to put each blocked pair of the fan
   // back in the queue, each checked against the whole fan again (51 rejected collapses per collapse done;
   // twice the faces took 60 times as long). Blocked pairs around a vertex of many faces are retried only
   // every (faces / 16) changes.
-  IndexedMesh fan;
-  fan.positions = {{0, 0, 0}, {0, 0, 1}};
-  for (Index i = 0; i < 2000; ++i) {
-    const double angle = 2 * M_PI * i / 2000;
-    fan.positions.emplace_back(static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle)),
-                               0.5f);
-    fan.triangles.push_back({0, 1, i + 2});
-  }
-  const DecimateResult r = run(fan, faces(100));
+  const DecimateResult r = run(book(2000, 1), faces(100));
   EXPECT_EQ(r.mesh.face_count(), 100u) << r.stats.reason;
   EXPECT_LT(r.stats.rejected_flip, 10 * r.stats.collapses);
 }
