@@ -1,17 +1,19 @@
 #include "ocsimp/cluster/cluster.h"
 
-#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
+#include <limits>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "cells.h"
 #include "ocsimp/core/error.h"
+#include "ocsimp/core/system.h"
 #include "place.h"
 #include "regroup.h"
 
@@ -294,9 +296,8 @@ QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options, Clust
       !(options.carried_border_weight >= 0.0) || !std::isfinite(options.carried_border_weight)) {
     throw Error("the boundary weight must be a non-negative number");
   }
-  const unsigned threads = options.threads > 0
-                               ? options.threads
-                               : static_cast<unsigned>(std::max(1, tbb::info::default_concurrency()));
+  const unsigned threads = static_cast<unsigned>(
+      worker_threads(static_cast<int>(std::min(options.threads, unsigned{std::numeric_limits<int>::max()}))));
   ClusterStats local;
   tbb::task_arena arena(static_cast<int>(threads));
   const Vec3d origin = stream.vertices().origin;  // the stream's positions and corners are relative to it

@@ -1,5 +1,6 @@
 #include "ocsimp/core/system.h"
 
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
@@ -20,6 +21,11 @@
 #include "ocsimp/core/error.h"
 
 namespace ocsimp {
+
+int worker_threads(int requested) {
+  const int cores = std::max(1, tbb::info::default_concurrency());
+  return requested > 0 ? std::min(requested, cores) : cores;
+}
 
 std::uint64_t physical_memory_bytes() {
   const long pages = sysconf(_SC_PHYS_PAGES);

@@ -62,6 +62,7 @@
 #include "edge_heap.h"
 #include "ocsimp/core/big_vector.h"
 #include "ocsimp/core/error.h"
+#include "ocsimp/core/system.h"
 #include "placement.h"
 
 namespace ocsimp {
@@ -2415,7 +2416,7 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   }
   Storage storage;
   Decimator d(options, storage);
-  tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+  tbb::task_arena arena(worker_threads(options.threads));
   arena.execute([&] { d.build(input); });
   d.target_f = options.target_faces;
   if (options.target_ratio > 0) {

@@ -23,6 +23,15 @@ TEST(System, ReportsMemory) {
   EXPECT_GE(peak_rss_bytes(), current_rss_bytes() / 2);
 }
 
+TEST(System, WorkerThreadsNeverExceedTheCores) {
+  const int cores = worker_threads(0);
+  EXPECT_GE(cores, 1);
+  EXPECT_EQ(worker_threads(-3), cores);
+  EXPECT_EQ(worker_threads(1), 1);
+  EXPECT_EQ(worker_threads(cores), cores);
+  EXPECT_EQ(worker_threads(100000), cores);
+}
+
 TEST(Error, MessageNamesFilePlaceAndReason) {
   EXPECT_STREQ(Error("a.ply", FilePosition::byte(12), "bad").what(), "a.ply: byte 12: bad");
   EXPECT_STREQ(Error("a.obj", FilePosition::line(3), "bad").what(), "a.obj: line 3: bad");

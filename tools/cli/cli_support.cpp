@@ -159,7 +159,8 @@ ProgressFn make_progress(bool quiet) {
 
 std::unique_ptr<tbb::global_control> limit_threads(int threads) {
   if (threads <= 0) return nullptr;
-  return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, threads);
+  return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                               worker_threads(threads));
 }
 
 double seconds_since(std::chrono::steady_clock::time_point start) {

@@ -70,8 +70,8 @@ void write_json_report(const std::string& path, const nlohmann::json& report);
 
 double seconds_since(std::chrono::steady_clock::time_point start);
 
-// Keeps every parallel loop of the command, the readers' included, to `threads` cores while the result
-// lives; 0 (or less): all cores, and nothing is returned.
+// Keeps every parallel loop of the command, the readers' included, to `threads` cores (at most the
+// machine's: see worker_threads) while the result lives; 0 (or less): all cores, and nothing is returned.
 std::unique_ptr<tbb::global_control> limit_threads(int threads);
 
 // Whether the end-of-run summary goes to stdout: not with --quiet, and not on a pipe or file (where only

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "ocsimp/core/error.h"
+#include "ocsimp/core/system.h"
 #include "ocsimp/streaming/ply_writer.h"
 
 namespace ocsimp {
@@ -332,7 +333,7 @@ void produce_in_order(std::uint64_t count, int threads, Make make, Sink sink) {
   constexpr std::uint64_t kBlock = 1 << 16;
   const std::uint64_t blocks_per_round = 64;
   std::vector<std::vector<Item>> buffers(blocks_per_round);
-  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  tbb::task_arena arena(worker_threads(threads));
   for (std::uint64_t start = 0; start < count; start += kBlock * blocks_per_round) {
     const std::uint64_t round_end = std::min(count, start + kBlock * blocks_per_round);
     const std::uint64_t blocks = (round_end - start + kBlock - 1) / kBlock;

@@ -9,6 +9,11 @@
 namespace ocsimp {
 
 std::uint64_t physical_memory_bytes();
+
+// The threads a parallel stage runs on when asked for `requested` (0 or less: all cores): never more than
+// the cores. Outputs never depend on it; more threads than cores only share them, and a thousand of them
+// ran out of address space under a 4 GB limit, which TBB reports by aborting.
+int worker_threads(int requested);
 // Peak and current resident set size of this process (from /proc/self/status); 0 where unknown.
 std::uint64_t peak_rss_bytes();
 std::uint64_t current_rss_bytes();
