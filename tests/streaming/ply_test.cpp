@@ -952,6 +952,8 @@ const Malformed kMalformed[] = {
     {"unknown_format.ply", "unknown format 'binary_middle_endian'"},
     {"no_end_header.ply", "unknown header keyword"},
     {"property_before_element.ply", "property outside any element"},
+    {"duplicate_element.ply", "a second element named 'vertex'"},
+    {"duplicate_property.ply", "a second property named 'y' in element 'vertex'"},
     {"negative_count.ply", "negative element count"},
     {"non_numeric_count.ply", "is not a number"},
     {"unsupported_type.ply", "unsupported property type 'half'"},
