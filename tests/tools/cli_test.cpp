@@ -105,6 +105,30 @@ TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
     EXPECT_EQ(r.exit_code, 2) << c.args;
     EXPECT_NE(r.err.find(c.message), std::string::npos) << c.args << "\n" << r.err;
     EXPECT_EQ(r.err.find("0.000000"), std::string::npos) << r.err;
+    // One line, like every other error, naming the command whose help lists the flags.
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_EQ(r.err.rfind("ocsimp: ", 0), 0u) << r.err;
+    const std::string command = std::string(c.args).substr(0, std::string(c.args).find(' '));
+    EXPECT_NE(r.err.find("(see ocsimp " + command + " --help)"), std::string::npos) << r.err;
+  }
+}
+
+TEST(Cli, TargetsThatContradictEachOtherAreRefused) {
+  test::TempDir dir;
+  const std::string mesh = dir / "sphere.ply";
+  write_mesh(mesh, test::sphere(2));
+  for (const char* command : {"decimate", "simplify"}) {
+    // Two face targets: one used to win silently.
+    const CommandResult both =
+        run(std::string(command) + " " + mesh + " -o " + (dir / "out.ply") + " --faces 10 --ratio 0.5", dir);
+    EXPECT_EQ(both.exit_code, 2) << both.err;
+    EXPECT_NE(both.err.find("--faces excludes --ratio"), std::string::npos) << both.err;
+    // An infinite error bound is no target by itself.
+    const CommandResult unbounded =
+        run(std::string(command) + " " + mesh + " -o " + (dir / "out.ply") + " --max-error inf", dir);
+    EXPECT_EQ(unbounded.exit_code, 2) << unbounded.err;
+    EXPECT_NE(unbounded.err.find("a finite --max-error E"), std::string::npos) << unbounded.err;
+    EXPECT_FALSE(std::filesystem::exists(dir / "out.ply"));
   }
 }
 

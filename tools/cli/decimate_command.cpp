@@ -29,12 +29,14 @@ void add_decimate_command(CLI::App& app) {
   DecimateOptions& o = flags->options;
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
-  cmd->add_option("--faces", o.target_faces,
-                  "Stop at exactly N faces (N-1 where a closed manifold's parity forbids N)")
-      ->check(whole_number(1));
+  CLI::Option* faces =
+      cmd->add_option("--faces", o.target_faces,
+                      "Stop at exactly N faces (N-1 where a closed manifold's parity forbids N)")
+          ->check(whole_number(1));
   cmd->add_option("--vertices", o.target_vertices, "Stop at exactly N vertices")->check(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Stop at round(R * input faces) faces, R in (0, 1]")
-      ->check(fraction());
+      ->check(fraction())
+      ->excludes(faces);
   cmd->add_option("--max-error", o.max_error,
                   "Apply no collapse whose cost, as a distance in model units, exceeds E")
       ->check(non_negative_number(true));
@@ -73,7 +75,7 @@ void add_decimate_command(CLI::App& app) {
     options.area_weighting = !flags->no_area_weighting;
     if (options.target_faces == 0 && options.target_vertices == 0 && options.target_ratio == 0 &&
         !(options.max_error < std::numeric_limits<double>::infinity())) {
-      throw Error("decimate needs --faces N, --vertices N, --ratio R or --max-error E");
+      throw Error("decimate needs --faces N, --vertices N, --ratio R or a finite --max-error E");
     }
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;

@@ -1,6 +1,8 @@
 // ocsimp: simplify triangle meshes of any size. One subcommand per file in this folder.
 #include <cstdio>
 #include <exception>
+#include <string>
+#include <vector>
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
@@ -20,10 +22,17 @@ int main(int argc, char** argv) {
   ocsimp::cli::add_lod_command(app);
   ocsimp::cli::add_bench_command(app);
   // New commands: add their registration above this line.
+  // A usage error is one line like every other error, naming the command whose help lists its flags.
+  app.failure_message([](const CLI::App* top, const CLI::Error& e) {
+    std::string help = "ocsimp";
+    const std::vector<CLI::App*> used = top->get_subcommands();
+    if (!used.empty()) help += " " + used.front()->get_name();
+    return "ocsimp: " + std::string(e.what()) + " (see " + help + " --help)\n";
+  });
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    // Help and version exit 0; usage errors exit 2 with CLI11's one-line message.
+    // Help and version exit 0; usage errors exit 2 with the message above.
     const int code = app.exit(e);
     return code == 0 ? 0 : 2;
   } catch (const ocsimp::Error& e) {

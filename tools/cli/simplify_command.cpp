@@ -49,10 +49,12 @@ void add_simplify_command(CLI::App& app) {
   SimplifyOptions& o = flags->options;
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
-  cmd->add_option("--faces", o.target_faces,
-                  "Exact face count (N-1 where a closed manifold's parity forbids N)")
-      ->check(whole_number(1));
-  cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")->check(fraction());
+  CLI::Option* faces = cmd->add_option("--faces", o.target_faces,
+                                       "Exact face count (N-1 where a closed manifold's parity forbids N)")
+                           ->check(whole_number(1));
+  cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
+      ->check(fraction())
+      ->excludes(faces);
   cmd->add_option("--max-error", o.max_error, "Largest collapse cost allowed, as a distance in model units")
       ->check(non_negative_number(true));
   cmd->add_option(
@@ -80,7 +82,7 @@ void add_simplify_command(CLI::App& app) {
     SimplifyOptions options = flags->options;
     const auto limit = limit_threads(options.threads);
     if (options.target_faces == 0 && options.target_ratio == 0 && !std::isfinite(options.max_error)) {
-      throw Error("simplify: give --faces, --ratio or --max-error");
+      throw Error("simplify needs --faces N, --ratio R or a finite --max-error E");
     }
     check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
