@@ -16,7 +16,13 @@ std::string format_message(const std::string& file, const FilePosition& position
     case FilePosition::Kind::none:
       break;
   }
-  return message + reason;
+  message += reason;
+  // Reasons quote the file's own bytes: a NUL would end the printed line early and an escape sequence
+  // would drive the terminal, so control characters print as '?'.
+  for (char& c : message) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  }
+  return message;
 }
 
 }  // namespace

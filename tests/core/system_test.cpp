@@ -38,5 +38,12 @@ TEST(Error, MessageNamesFilePlaceAndReason) {
   EXPECT_STREQ(Error("just this").what(), "just this");
 }
 
+TEST(Error, ControlCharactersQuotedFromAFilePrintAsQuestionMarks) {
+  // A NUL ended the printed message early; an escape sequence reached the terminal.
+  const Error e("a.ply", FilePosition::line(11),
+                std::string("'0\0x' and '\x1b[2Jz\nx\x7f' are not numbers", 36));
+  EXPECT_STREQ(e.what(), "a.ply: line 11: '0?x' and '?[2Jz?x?' are not numbers");
+}
+
 }  // namespace
 }  // namespace ocsimp

@@ -19,7 +19,8 @@ struct FilePosition {
 };
 
 // Thrown for bad input, failed output and impossible requests. what() is one line:
-// "FILE: byte N: REASON", "FILE: line N: REASON" or "FILE: REASON" (or just REASON without a file).
+// "FILE: byte N: REASON", "FILE: line N: REASON" or "FILE: REASON" (or just REASON without a file), with
+// any control character in it (a NUL or an escape quoted from the file) shown as '?'.
 class Error : public std::runtime_error {
  public:
   Error(std::string file, FilePosition position, std::string reason);
