@@ -128,10 +128,16 @@ void AtomicFile::flush() {
 
 void AtomicFile::commit() {
   flush();
-  // New files get the usual permissions (mkstemp makes them 0600).
-  const mode_t mask = ::umask(0);
-  ::umask(mask);
-  ::fchmod(fd_, 0666 & ~mask);
+  // A file replaced keeps its permissions (a private 0600 output stays private); a new one gets the usual
+  // ones, where mkstemp made it 0600.
+  struct stat existing {};
+  if (::stat(path_.c_str(), &existing) == 0 && S_ISREG(existing.st_mode)) {
+    ::fchmod(fd_, existing.st_mode & 07777);
+  } else {
+    const mode_t mask = ::umask(0);
+    ::umask(mask);
+    ::fchmod(fd_, 0666 & ~mask);
+  }
   if (::close(fd_) != 0) {
     fd_ = -1;
     throw Error(path_, {}, system_reason("close failed"));

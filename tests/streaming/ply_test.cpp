@@ -2,6 +2,7 @@
 // shared meshes, and one test per malformed file in tests/data/malformed/ply.
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <array>
 #include <chrono>
@@ -300,6 +301,25 @@ TEST(PlyStreamWriter, FailedWriteKeepsThePreviousFile) {
   EXPECT_THROW(write_mesh(dir / "kept.ply", bad), Error);
   EXPECT_EQ(read_bytes(dir / "kept.ply"), kSquareAscii);
   EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator()), 1);
+}
+
+TEST(PlyStreamWriter, AReplacedFileKeepsItsPermissions) {
+  // Outputs are renamed over the old file: they used to take the usual 0666 & ~umask, so a private 0600 file
+  // became readable by everyone.
+  test::TempDir dir;
+  const std::string path = dir / "private.ply";
+  write_mesh(path, test::grid_square(2));
+  for (const fs::perms mode :
+       {fs::perms::owner_read | fs::perms::owner_write, fs::perms::owner_all | fs::perms::group_read}) {
+    fs::permissions(path, mode);
+    write_mesh(path, test::grid_square(3));
+    EXPECT_EQ(fs::status(path).permissions(), mode);
+  }
+  // A new file gets the usual ones, not mkstemp's 0600.
+  const mode_t mask = ::umask(0);
+  ::umask(mask);
+  write_mesh(dir / "new.ply", test::grid_square(2));
+  EXPECT_EQ(static_cast<unsigned>(fs::status(dir / "new.ply").permissions()), 0666u & ~mask);
 }
 
 TEST(PlyStreamWriter, RejectsMisuse) {
