@@ -322,6 +322,9 @@ TEST(Cli, AReportThatWouldOverwriteAMeshIsRefused) {
       "simplify " + mesh + " -o " + out + " --ratio 0.5 --report " + dir.path.string() + "/./out.ply",
       "lod " + mesh + " -o " + (dir / "out_{faces}.ply") + " --faces 20,10 --report " + (dir / "out_10.ply"),
       "compare " + mesh + " " + mesh + " --report " + mesh,
+      // Checked before the benchmark runs (the JSON's folder was found missing only at its end).
+      "bench " + mesh + " --ratios 0.5 --json " + mesh,
+      "bench " + mesh + " --ratios 0.5 --csv " + mesh,
   };
   for (const std::string& command : commands) {
     const CommandResult r = run(command, dir);

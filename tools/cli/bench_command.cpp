@@ -69,6 +69,10 @@ void add_bench_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "Only the table: no progress lines on stderr");
   cmd->callback([flags] {
     if (flags->faces.empty() && flags->ratios.empty()) throw Error("bench: give --faces or --ratios");
+    // Refused before the benchmark runs, not after it.
+    for (const std::string* path : {&flags->json, &flags->csv}) {
+      if (!path->empty()) check_report_destination(*path, {flags->input});
+    }
     std::vector<BenchMethod> methods;
     for (const std::string& name : flags->methods) methods.push_back(parse_bench_method(name));
     if (methods.empty()) methods = available_bench_methods();
