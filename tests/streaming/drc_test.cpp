@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <string>
@@ -85,6 +86,41 @@ TEST(Drc, PositionsOnly) {
   EXPECT_FALSE(back.has_normals() || back.has_uvs() || back.has_colors());
   test::expect_same_faces(mesh, back, test::match_vertices(mesh, back, quantization_bound(mesh, 16)));
   EXPECT_EQ(analyze_topology(back).boundary_edges, 0u);
+}
+
+TEST(Drc, AFanOfManyFacesRoundTrips) {
+  // A disk fanned from its centre to 40,000 rim vertices: Draco's edgebreaker coder took time growing with
+  // the square of the centre's faces (50 s at 640,000), so such meshes are written with its sequential coder.
+  TempDir dir;
+  IndexedMesh fan;
+  constexpr Index kRim = 40000;
+  fan.positions.emplace_back(0, 0, 0);
+  for (Index i = 0; i < kRim; ++i) {
+    const double angle = 2 * M_PI * i / kRim;
+    fan.positions.emplace_back(static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle)), 0);
+    fan.triangles.push_back({0, i + 1, (i + 1) % kRim + 1});
+  }
+  write_mesh(dir / "fan.drc", fan);
+  const IndexedMesh back = read_mesh(dir / "fan.drc");
+  ASSERT_EQ(back.vertex_count(), fan.vertex_count());
+  ASSERT_EQ(back.face_count(), fan.face_count());
+  // The same disk: one centre on every face, every other vertex on the rim, the rim its only border.
+  const double bound = quantization_bound(fan, 16);
+  std::vector<Index> faces_at(back.vertex_count(), 0);
+  for (const Triangle& t : back.triangles) {
+    for (Index v : t) ++faces_at[v];
+  }
+  const auto centre =
+      static_cast<Index>(std::max_element(faces_at.begin(), faces_at.end()) - faces_at.begin());
+  EXPECT_EQ(faces_at[centre], kRim);
+  EXPECT_LT(back.positions[centre].norm(), bound);
+  for (Index v = 0; v < back.vertex_count(); ++v) {
+    if (v != centre) {
+      EXPECT_NEAR(back.positions[v].norm(), 1.0, bound) << v;
+    }
+  }
+  for (const Triangle& t : back.triangles) EXPECT_TRUE(t[0] == centre || t[1] == centre || t[2] == centre);
+  EXPECT_EQ(analyze_topology(back).boundary_edges, kRim);
 }
 
 TEST(Drc, StreamServesTheDecodedFacesInBatches) {
