@@ -216,9 +216,11 @@ TEST(DistanceIndex, RejectsMeshesItCannotMeasure) {
   IndexedMesh not_finite = test::grid_square(1);
   not_finite.positions[2].y() = std::numeric_limits<float>::quiet_NaN();
   EXPECT_THROW(DistanceIndex{not_finite}, Error);
+  // A mesh 1e30 across is measured (see TinyAndHugeMeshesMeasureLikeTheirUnitSizedCopies), but a point 1e30
+  // away from a unit-sized one is too far for its float index.
   IndexedMesh huge = test::grid_square(1);
   huge.positions[1].x() = 1e30f;
-  EXPECT_THROW(DistanceIndex{huge}, Error);
+  EXPECT_THROW(measure_distance(test::grid_square(2), huge), Error);
   EXPECT_THROW(measure_distance(IndexedMesh{}, test::grid_square(2)), Error);
   EXPECT_THROW(measure_distance(test::grid_square(2), IndexedMesh{}), Error);
   CompareOptions nothing;
@@ -427,6 +429,30 @@ TEST(MeasureDistance, SphereAgainstInscribedIcosahedron) {
   // Forward has no closed form; it must at least lie well inside (0, gap).
   EXPECT_GT(d.forward.mean, 0.25 * mean);
   EXPECT_LT(d.forward.mean, gap);
+}
+
+TEST(MeasureDistance, TinyAndHugeMeshesMeasureLikeTheirUnitSizedCopies) {
+  // The index's float arithmetic underflowed on a mesh 1e-30 across (nothing was culled: minutes for a
+  // small mesh) and Embree ignored coordinates beyond 1.8e18. Scaled by a power of two, every distance is
+  // the unit-sized copy's, scaled exactly.
+  const IndexedMesh sphere = test::sphere(4), ico = icosahedron();
+  CompareOptions options;
+  options.samples = 20000;
+  const SurfaceDistance unit = measure_distance(sphere, ico, options);
+  for (const int exponent : {-100, 100}) {
+    SCOPED_TRACE(exponent);
+    IndexedMesh a = sphere, b = ico;
+    for (IndexedMesh* mesh : {&a, &b}) {
+      for (Vec3f& p : mesh->positions) p *= std::ldexp(1.0f, exponent);
+    }
+    const SurfaceDistance d = measure_distance(a, b, options);
+    for (const auto& [scaled, original] : {std::pair{d.forward, unit.forward}, {d.backward, unit.backward}}) {
+      EXPECT_EQ(scaled.hausdorff, std::ldexp(original.hausdorff, exponent));
+      EXPECT_EQ(scaled.mean, std::ldexp(original.mean, exponent));
+      EXPECT_EQ(scaled.rms, std::ldexp(original.rms, exponent));
+    }
+    EXPECT_EQ(d.percent(d.rms), unit.percent(unit.rms));
+  }
 }
 
 TEST(MeasureDistance, SameSeedSameNumbersAndSeedsDiffer) {

@@ -144,9 +144,8 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   impl.bounds = mesh.bounds();
   impl.coordinate_scale =
       std::max(impl.bounds.lo.cwiseAbs().maxCoeff(), impl.bounds.hi.cwiseAbs().maxCoeff());
-  // Embree ignores queries beyond about 1.8e18 (its FLT_LARGE); no real mesh comes near.
-  if (impl.coordinate_scale > 1e18)
-    throw Error(impl.name, {}, "coordinates beyond 1e18 are too large to measure distances on");
+  if (impl.coordinate_scale > 0 && (impl.coordinate_scale < 0x1p-20 || impl.coordinate_scale > 0x1p20))
+    impl.embree_scale = std::ldexp(1.0, -std::ilogb(impl.coordinate_scale));
 
   const int replications =
       mesh.triangles.size() <= kSplitManyTriangles ? kSplitReplications : kSplitReplicationsLarge;
@@ -171,8 +170,9 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
     rtcReleaseGeometry(geometry);
     throw_embree_error(impl, "allocating the mesh buffers");
   }
+  const auto embree_scale = static_cast<float>(impl.embree_scale);
   for (std::size_t v = 0; v < vertex_count; ++v)
-    for (int k = 0; k < 3; ++k) positions[3 * v + k] = mesh.positions[v][k];
+    for (int k = 0; k < 3; ++k) positions[3 * v + k] = mesh.positions[v][k] * embree_scale;
   for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
     for (int k = 0; k < 3; ++k) corners[3 * f + k] = mesh.triangles[f][k];
   impl.positions = positions;
@@ -252,9 +252,10 @@ namespace {
 struct PointQuery {
   const DistanceIndex::Impl* index;
   Vec3d p;
-  // What Embree's float culling may be off by: the query point rounded to float, plus rounding in its
-  // point-to-box distances. Radii handed to Embree are widened by it so that no triangle that could beat
-  // the current best is ever culled, which keeps the answer the exact minimum whatever the traversal order.
+  // What Embree's float culling may be off by, in its units (see embree_scale): the query point rounded to
+  // float, plus rounding in its point-to-box distances. Radii handed to Embree are widened by it so that no
+  // triangle that could beat the current best is ever culled, which keeps the answer the exact minimum
+  // whatever the traversal order.
   double margin;
   double limit_squared;  // triangles farther than the caller's bound are ignored
   ClosestPoint best;
@@ -287,7 +288,7 @@ bool visit_triangle(RTCPointQueryFunctionArguments* args) {
   if (d2 < query.best.distance_squared ||
       (d2 == query.best.distance_squared && args->primID < query.best.triangle)) {
     query.best = {point, d2, static_cast<Index>(args->primID)};
-    const float radius = culling_radius(std::sqrt(d2), query.margin);
+    const float radius = culling_radius(std::sqrt(d2) * index.embree_scale, query.margin);
     if (radius < args->query->radius) {
       args->query->radius = radius;
       return true;
@@ -300,15 +301,21 @@ bool visit_triangle(RTCPointQueryFunctionArguments* args) {
 
 ClosestPoint DistanceIndex::closest_point(const Vec3d& p, double upper_bound) const {
   PointQuery query{impl_.get(), p, 0.0, upper_bound * upper_bound, {}};
-  const Vec3f pf = p.cast<float>();
-  query.margin = (pf.cast<double>() - p).norm() + 1e-6 * (impl_->coordinate_scale + p.cwiseAbs().maxCoeff());
+  const double scale = impl_->embree_scale;
+  const Vec3d scaled = p * scale;
+  // Embree ignores points beyond about 1.8e18 (its FLT_LARGE) in its units: a mesh's size or less there.
+  if (!(scaled.cwiseAbs().maxCoeff() < 1e18))
+    throw Error(impl_->name, {}, "a point to measure lies too far from this mesh for its float index");
+  const Vec3f pf = scaled.cast<float>();
+  query.margin = (pf.cast<double>() - scaled).norm() +
+                 1e-6 * (impl_->coordinate_scale * scale + scaled.cwiseAbs().maxCoeff());
   RTCPointQuery embree_query;
   embree_query.x = pf.x();
   embree_query.y = pf.y();
   embree_query.z = pf.z();
   embree_query.time = 0;
   embree_query.radius = upper_bound < std::numeric_limits<double>::infinity()
-                            ? culling_radius(upper_bound, query.margin)
+                            ? culling_radius(upper_bound * scale, query.margin)
                             : std::numeric_limits<float>::infinity();
   RTCPointQueryContext context;
   rtcInitPointQueryContext(&context);

@@ -31,6 +31,11 @@ struct DistanceIndex::Impl {
   Box3 bounds;
   Vec3d origin = Vec3d::Zero();  // the mesh's (IndexedMesh::origin): positions are relative to it
   double coordinate_scale = 0;   // largest absolute coordinate: sizes the margin for Embree's float culling
+  // A power of two: Embree's buffer holds the positions times `embree_scale` (exactly), and queries are
+  // scaled alike, whenever the coordinates are so small or large that Embree's float arithmetic would
+  // underflow or overflow (squared distances of a mesh 1e-30 across are 0 in float, and then nothing is
+  // culled: 320 faces took 9 s; beyond about 1.8e18 Embree ignores a query). 1 for everyday units.
+  double embree_scale = 1;
 
   Impl() = default;
   Impl(const Impl&) = delete;
@@ -39,7 +44,7 @@ struct DistanceIndex::Impl {
 
   Vec3d vertex(Index v) const {
     const float* p = positions + 3 * std::size_t{v};
-    return {double(p[0]), double(p[1]), double(p[2])};
+    return Vec3d(double(p[0]), double(p[1]), double(p[2])) / embree_scale;
   }
   double total_area() const { return cumulative_area.back(); }
 
