@@ -138,12 +138,9 @@ std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path, co
   throw Error(path, {}, "unsupported format");
 }
 
-IndexedMesh read_mesh(const std::string& path, const ReadOptions& options) {
-  std::unique_ptr<TriangleStream> stream = open_triangle_stream(path, options);
-  return read_mesh(*stream);
-}
+namespace {
 
-IndexedMesh read_mesh(TriangleStream& source) {
+IndexedMesh drain(TriangleStream& source) {
   TriangleStream* stream = &source;
   const std::string& path = source.path();
   IndexedMesh mesh;
@@ -180,7 +177,21 @@ IndexedMesh read_mesh(TriangleStream& source) {
       }
     }
   }
-  if (mesh.triangles.empty()) throw Error(path, {}, "the mesh has no faces");
+  return mesh;
+}
+
+}  // namespace
+
+IndexedMesh read_mesh(const std::string& path, const ReadOptions& options) {
+  std::unique_ptr<TriangleStream> stream = open_triangle_stream(path, options);
+  IndexedMesh mesh = drain(*stream);
+  if (options.faces_required && mesh.triangles.empty()) throw Error(path, {}, "the mesh has no faces");
+  return mesh;
+}
+
+IndexedMesh read_mesh(TriangleStream& stream) {
+  IndexedMesh mesh = drain(stream);
+  if (mesh.triangles.empty()) throw Error(stream.path(), {}, "the mesh has no faces");
   return mesh;
 }
 

@@ -499,7 +499,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     throw Error(path, FilePosition::line(index_property.header_line),
                 "property " + index_property.name + " must be a list");
   }
-  if (face_element.count == 0) {
+  if (face_element.count == 0 && options.faces_required) {
     throw Error(path, FilePosition::line(face_element.header_line),
                 "element " + face_element.name + " is empty");
   }

@@ -202,11 +202,9 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
                  path.c_str(), mesh.origin.x(), mesh.origin.y(), mesh.origin.z());
   }
   if (mesh.triangles.empty()) {
-    std::fprintf(
-        stderr,
-        "ocsimp: warning: %s has no faces (%zu vertices): every triangle collapsed; ocsimp cannot read "
-        "it back\n",
-        path.c_str(), mesh.positions.size());
+    std::fprintf(stderr,
+                 "ocsimp: warning: %s has no faces (%zu vertices): only info and convert read such a file\n",
+                 path.c_str(), mesh.positions.size());
   }
 }
 

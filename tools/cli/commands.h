@@ -50,8 +50,9 @@ ProgressFn make_progress(bool quiet);
 
 // Writes a simplified mesh to `path` (atomically, as write_mesh does), and warns on stderr, even with
 // --quiet, when it has no faces: every triangle collapsed, as on an input too thin for the resolution or with
-// a target below what its topology allows. The vertices are still written (except to Draco, whose writer
-// refuses a mesh without faces with an error), but ocsimp's readers refuse such a file as input.
+// a target below what its topology allows, or on converting a file without faces. The vertices are still
+// written (except to Draco, whose writer refuses a mesh without faces with an error); `info` and `convert`
+// read such a file, the simplifying commands refuse it as input.
 void write_result(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options);
 
 // Refuses, before any work, a destination the command could not write at the end: a folder, or a path in a

@@ -27,6 +27,7 @@ void add_convert_command(CLI::App& app) {
     check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     ReadOptions read;
     read.progress = make_progress(flags->quiet);
+    read.faces_required = false;  // a mesh without faces converts too, with write_result's warning
     flags->write.progress = read.progress;
     write_result(flags->output, read_mesh(flags->input, read), flags->write);
   });

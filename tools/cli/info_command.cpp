@@ -18,7 +18,9 @@ void add_info_command(CLI::App& app) {
   cmd->add_flag("--json", *json, "Print one JSON object instead of text");
   cmd->callback([input, json] {
     const FileFormat format = detect_format(*input);
-    const IndexedMesh mesh = read_mesh(*input);
+    ReadOptions read;
+    read.faces_required = false;
+    const IndexedMesh mesh = read_mesh(*input, read);
     const MeshTopology topo = analyze_topology(mesh);
     Box3 box = mesh.bounds();  // in the file's coordinates
     box.lo += mesh.origin;

@@ -35,6 +35,9 @@ struct ReadOptions {
   // chunk at a time, and keeps no vertex array nor attributes; next() still yields indices into the file's
   // vertices and checks them against the file's vertex count. Other readers ignore it.
   std::function<void(const Vec3f* positions, std::size_t count)> vertex_sink;
+  // Whether read_mesh refuses a file without faces (a PLY's empty face element says so at its header line).
+  // `info` and `convert` read them: ocsimp writes one when every triangle of a clustering collapses.
+  bool faces_required = true;
 };
 
 std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
