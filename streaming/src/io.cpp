@@ -108,7 +108,9 @@ FileFormat detect_format(const std::string& path) {
     const auto by_name = format_of_extension(path);
     if (text || !by_name || *by_name == FileFormat::stl) return FileFormat::stl;
   }
-  if (starts_with(head, "ply")) return FileFormat::ply;  // a malformed PLY: let its parser say what is wrong
+  // A malformed PLY too: let its parser say what is wrong. (A text editor may have put a byte order mark
+  // before an ASCII one.)
+  if (starts_with(head.substr(starts_with(head, "\xEF\xBB\xBF") ? 3 : 0), "ply")) return FileFormat::ply;
   // OBJ has no magic: accept text that starts with an OBJ statement or a comment.
   if (text) {
     for (std::string_view keyword : {"v ", "v\t", "vn ", "vn\t", "vt ", "vt\t", "vp ", "f ", "f\t", "#", "o ",

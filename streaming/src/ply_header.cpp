@@ -43,6 +43,8 @@ class HeaderParser {
 
   PlyHeader parse() {
     PlyHeader header;
+    // A UTF-8 byte order mark, as a text editor may put before an ASCII PLY, is not part of the first line.
+    if (reader_.fill(3) >= 3 && std::memcmp(reader_.data(), "\xEF\xBB\xBF", 3) == 0) reader_.consume(3);
     // Lines that end in a CR alone would read as one long first line: say so rather than "no end_header".
     const std::size_t start = reader_.fill(5);
     if (start >= 4 && std::memcmp(reader_.data(), "ply\r", 4) == 0 &&

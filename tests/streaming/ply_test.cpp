@@ -577,6 +577,10 @@ TEST(PlyTypes, CrlfHeaderCommentsAndObjInfo) {
       "property list uchar int vertex_indices\r\nend_header\r\n"
       "0 0 0\r\n1 0 0\r\n1 1 0\r\n0 1 0\r\n3 0 1 2\r\n3 0 2 3\r\n");
   EXPECT_EQ(read_mesh(dir / "crlf.ply").triangles, kSquareTriangles);
+  // Saved by a Windows editor with a UTF-8 byte order mark, under any name: read as OBJ and STL files are.
+  write_bytes(dir / "bom.txt", "\xEF\xBB\xBF" + read_bytes(dir / "crlf.ply"));
+  EXPECT_EQ(detect_format(dir / "bom.txt"), FileFormat::ply);
+  EXPECT_EQ(read_mesh(dir / "bom.txt").triangles, kSquareTriangles);
 
   Bytes out;
   for (float v : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 1.f, 0.f}) out.put(v);
