@@ -231,6 +231,10 @@ TEST(Pipeline, OutOfCoreGivesTheInMemorySoupResult) {
   EXPECT_TRUE(result.out_of_core);
   EXPECT_TRUE(result.clustered);
   EXPECT_EQ(result.mesh.face_count(), 3'000u);
+  // The smallest budget of all is no exception (one byte left the reader unbounded).
+  SimplifyOptions tiny = options;
+  tiny.memory_limit = 1;
+  EXPECT_TRUE(simplify(path, tiny).out_of_core);
 
   ClusterOptions cluster_options;
   cluster_options.octree = true;

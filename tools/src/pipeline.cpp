@@ -89,7 +89,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
           ? kClusterBytesPerCell *
                 fine_cells_for(2.0 * static_cast<double>(options.target_faces), fine_per_vertex)
           : budget / 2;
-  read.memory_budget = static_cast<std::uint64_t>(budget - std::min(budget / 2, cluster_reserve));
+  // At least a byte: 0 would mean no bound at all (a --memory-limit of 1 byte read the input in core).
+  read.memory_budget =
+      std::max<std::uint64_t>(1, static_cast<std::uint64_t>(budget - std::min(budget / 2, cluster_reserve)));
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
   stage.out_of_core = dereferenced_out_of_core(*stream);
   const double vertex_bytes = static_cast<double>(stream->vertices().positions.size()) * 12.0;
