@@ -77,6 +77,10 @@ TEST(Cli, UnknownFlagIsAnError) {
   const CommandResult r = run("info --no-such-flag x.ply", dir);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("no-such-flag"), std::string::npos);
+  // A misspelt command is named as such (CLI11 said a command was missing).
+  const CommandResult command = run("decimat x.ply", dir);
+  EXPECT_EQ(command.exit_code, 2);
+  EXPECT_EQ(command.err, "ocsimp: unknown command 'decimat' (see ocsimp --help)\n");
 }
 
 // A negative count used to pass as 2^64 - 3 (a silent no-op decimation), and bounds printed as "0.000000"

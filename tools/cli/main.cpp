@@ -29,6 +29,13 @@ int main(int argc, char** argv) {
     if (!used.empty()) help += " " + used.front()->get_name();
     return "ocsimp: " + std::string(e.what()) + " (see " + help + " --help)\n";
   });
+  // CLI11 reports a misspelt command as a missing one.
+  const std::string first = argc > 1 ? argv[1] : "";
+  if (!first.empty() && first[0] != '-' &&
+      app.get_subcommands([&](CLI::App* command) { return command->check_name(first); }).empty()) {
+    std::fprintf(stderr, "ocsimp: unknown command '%s' (see ocsimp --help)\n", argv[1]);
+    return 2;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
