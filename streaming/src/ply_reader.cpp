@@ -1082,9 +1082,20 @@ void PlyStream::check_end_of_data() {
     if (begin_ascii_record()) fail("unexpected data after the last element");
     return;
   }
-  if (!reader_.at_end()) {
-    fail_at_byte(reader_.offset(), std::to_string(reader_.file_size() - reader_.offset()) +
-                                       " bytes of unexpected data after the last element");
+  // Line breaks or spaces after the binary data (some writers end the file with a newline) are not data;
+  // anything else is, and most likely means the header's counts are wrong.
+  const std::uint64_t end = reader_.offset();
+  while (!reader_.at_end()) {
+    const std::size_t n = reader_.fill(kBufferBytes);
+    const char* bytes = reader_.data();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (bytes[i] != '\n' && bytes[i] != '\r' && bytes[i] != ' ' && bytes[i] != '\t') {
+        const std::uint64_t extra = reader_.file_size() - end;
+        fail_at_byte(end, std::to_string(extra) + (extra == 1 ? " byte" : " bytes") +
+                              " of unexpected data after the last element");
+      }
+    }
+    reader_.consume(n);
   }
 }
 

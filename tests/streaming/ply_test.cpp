@@ -593,6 +593,9 @@ TEST(PlyTypes, CrlfHeaderCommentsAndObjInfo) {
   const IndexedMesh binary = read_mesh(dir / "crlf_binary.ply");
   EXPECT_EQ(binary.positions[2], Vec3f(1, 1, 0));
   EXPECT_EQ(binary.triangles, (std::vector<Triangle>{{0, 1, 2}}));
+  // A line break after the binary data, as some writers end their files, is not data (it was refused).
+  write_bytes(dir / "crlf_binary.ply", read_bytes(dir / "crlf_binary.ply") + "\r\n");
+  EXPECT_EQ(read_mesh(dir / "crlf_binary.ply").triangles, binary.triangles);
 }
 
 TEST(PlyTypes, AsciiToleratesBlankLinesAndExtraSpacesAndNoFinalNewline) {
