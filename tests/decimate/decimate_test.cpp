@@ -284,28 +284,35 @@ TEST(Decimate, AFannedDiskKeepsItsCentreAndRim) {
   // A flat disk fanned from its centre to 4,000 rim vertices: moving the centre to the rim would make
   // slivers of the whole fan, so each such pair is sent back by the shape penalty of the faces beside its
   // rim end (see refused_beside_small_end) at every change of the rim. The rim is decimated instead: every
-  // vertex stays on the circle or at the centre, and no face turns over.
+  // vertex stays on the circle or at the centre, and no face turns over. Then the same with the rim's
+  // radius jittered by 1e-4: the rim is no longer convex within a dozen steps, as rounding makes it on a
+  // disk of millions of rim vertices, and faces that far from where the centre would move turn over (see
+  // refused_farther_out).
   constexpr Index kRim = 4000;
-  IndexedMesh disk;
-  for (Index i = 0; i < kRim; ++i) {
-    const double angle = 2 * M_PI * i / kRim;
-    disk.positions.emplace_back(static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle)),
-                                0.f);
+  for (const double jitter : {0.0, 1e-4}) {
+    SCOPED_TRACE(jitter);
+    IndexedMesh disk;
+    for (Index i = 0; i < kRim; ++i) {
+      const double angle = 2 * M_PI * i / kRim,
+                   radius = 1 + jitter * (static_cast<int>(i * 7919 % 13) - 6) / 6;
+      disk.positions.emplace_back(static_cast<float>(radius * std::cos(angle)),
+                                  static_cast<float>(radius * std::sin(angle)), 0.f);
+    }
+    disk.positions.emplace_back(0.f, 0.f, 0.f);
+    for (Index i = 0; i < kRim; ++i) disk.triangles.push_back({kRim, i, (i + 1) % kRim});
+    const DecimateResult r = run(disk, faces(400));
+    EXPECT_EQ(r.mesh.face_count(), 400u) << r.stats.reason;
+    std::size_t centres = 0;
+    for (const Vec3f& p : r.mesh.positions) {
+      const double radius = std::hypot(p.x(), p.y());
+      EXPECT_EQ(p.z(), 0.f);
+      EXPECT_TRUE(radius < 1e-6 || std::abs(radius - 1) < 1e-4 + jitter) << p.transpose();
+      centres += radius < 1e-6;
+    }
+    EXPECT_EQ(centres, 1u);
+    // Every input face faces +z (the rim runs counter-clockwise).
+    for (const Triangle& t : r.mesh.triangles) EXPECT_GT(face_normal(r.mesh, t).z(), 0) << t[0];
   }
-  disk.positions.emplace_back(0.f, 0.f, 0.f);
-  for (Index i = 0; i < kRim; ++i) disk.triangles.push_back({kRim, i, (i + 1) % kRim});
-  const DecimateResult r = run(disk, faces(400));
-  EXPECT_EQ(r.mesh.face_count(), 400u) << r.stats.reason;
-  std::size_t centres = 0;
-  for (const Vec3f& p : r.mesh.positions) {
-    const double radius = std::hypot(p.x(), p.y());
-    EXPECT_EQ(p.z(), 0.f);
-    EXPECT_TRUE(radius < 1e-6 || std::abs(radius - 1) < 1e-4) << p.transpose();
-    centres += radius < 1e-6;
-  }
-  EXPECT_EQ(centres, 1u);
-  // Every input face faces +z (the rim runs counter-clockwise).
-  for (const Triangle& t : r.mesh.triangles) EXPECT_GT(face_normal(r.mesh, t).z(), 0) << t[0];
 }
 
 // A closed cylinder of radius 1 as CAD tools export it: `segments` long side quads split in two, and each cap
