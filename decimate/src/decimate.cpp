@@ -1569,13 +1569,15 @@ struct Decimator {
       if (verts[x].live_faces > kLargeFan) continue;  // another fan, as the other apex of a double cone
       all_live_faces(x, [&](Index g) {
         const Face& face = faces[g];
+        // Along the fan's rim only: a walk into the rest of the mesh (a cone's base) would find no fan faces.
+        if (!has_corner(face, big)) return true;
         for (Index y : face.v) {
           if (verts[y].stamp != s) {
             verts[y].stamp = s;
             scratch_ids.push_back(y);
           }
         }
-        if (x != small && has_corner(face, big) && !has_corner(face, small)) {
+        if (x != small && !has_corner(face, small)) {
           ++checks;
           const int c = corner_of(face, big);
           MovedShape m;
