@@ -5,9 +5,13 @@
 
 #include <gtest/gtest.h>
 #include <stdlib.h>
+#include <sys/resource.h>
+
+#include <csignal>
 
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -35,6 +39,17 @@ struct ScopedTmpdir {
     } else {
       ::unsetenv("TMPDIR");
     }
+  }
+};
+
+// A test's folder, with TMPDIR pointed at its "tmp" subfolder (`work`) for the test's scope.
+struct TestFolders {
+  test::TempDir dir;
+  std::string work = dir / "tmp";
+  std::optional<ScopedTmpdir> tmpdir;
+  TestFolders() {
+    std::filesystem::create_directories(work);
+    tmpdir.emplace(work);
   }
 };
 
@@ -95,10 +110,9 @@ void expect_same_corners(const std::string& path, std::uint64_t budget) {
 }
 
 TEST(ExternalDereference, BinaryAndAsciiPlyGiveTheInMemoryCorners) {
-  test::TempDir dir;
-  const std::string work = dir / "tmp";
-  std::filesystem::create_directories(work);
-  ScopedTmpdir tmpdir(work);
+  const TestFolders folders;
+  const test::TempDir& dir = folders.dir;
+  const std::string& work = folders.work;
   const IndexedMesh mesh = shuffled_grid(60);  // 3,721 vertices, 7,200 triangles
   const std::string binary = dir / "binary.ply", ascii = dir / "ascii.ply";
   write_mesh(binary, mesh);
@@ -132,10 +146,9 @@ TEST(ExternalDereference, ATinyBudgetTakesAtMost64Partitions) {
 }
 
 TEST(ExternalDereference, ObjWithPolygonsAttributesAndRelativeIndices) {
-  test::TempDir dir;
-  const std::string work = dir / "tmp";
-  std::filesystem::create_directories(work);
-  ScopedTmpdir tmpdir(work);
+  const TestFolders folders;
+  const test::TempDir& dir = folders.dir;
+  const std::string& work = folders.work;
   const std::string path = dir / "mixed.obj";
   std::ofstream(path) << "# quads, a pentagon, uvs, normals, negative indices, vertices after faces\n"
                          "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
@@ -188,10 +201,9 @@ TEST(ExternalDereference, OpenTriangleStreamChoosesByTheBudget) {
 }
 
 TEST(ExternalDereference, BadInputGivesTheReadersErrorAndLeavesNothing) {
-  test::TempDir dir;
-  const std::string work = dir / "tmp";
-  std::filesystem::create_directories(work);
-  ScopedTmpdir tmpdir(work);
+  const TestFolders folders;
+  const test::TempDir& dir = folders.dir;
+  const std::string& work = folders.work;
   const std::string bad = dir / "bad.ply";
   std::ofstream(bad)
       << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
@@ -218,6 +230,45 @@ TEST(ExternalDereference, BadInputGivesTheReadersErrorAndLeavesNothing) {
     EXPECT_NE(what.find("truncated.obj"), std::string::npos) << what;
     EXPECT_NE(what.find("line 4"), std::string::npos) << what;
   }
+  EXPECT_EQ(entries(work), 0u);
+}
+
+// A temporary folder without room for the corners' positions (here: a file size limit below them, which
+// fails the reservation as a full disk would) is reported before the partitions are resolved, with the way
+// out, and leaves nothing behind.
+TEST(ExternalDereference, NoRoomForTheCornersFailsBeforeResolvingAndSaysWhy) {
+  const TestFolders folders;
+  const test::TempDir& dir = folders.dir;
+  const std::string& work = folders.work;
+  const std::string path = dir / "grid.ply";
+  write_mesh(path, shuffled_grid(60));  // 3,721 vertices (44,652 bytes), 7,200 triangles (259,200 bytes)
+  rlimit old{};
+  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old), 0);
+  // Room for the spooled vertices and the coded faces, not for the corners.
+  rlimit small = old;
+  small.rlim_cur = 100'000;
+  if (old.rlim_max != RLIM_INFINITY && old.rlim_max < small.rlim_cur)
+    GTEST_SKIP() << "file size limit too low";
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // else going past the limit kills the process
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &small), 0);
+  bool resolved = false;
+  ReadOptions options;
+  options.memory_budget = 1200;
+  options.progress = [&](std::string_view phase, std::uint64_t, std::uint64_t) {
+    if (phase == "dereference") resolved = true;
+  };
+  std::string what;
+  try {
+    open_dereferenced_stream(path, options);
+  } catch (const Error& e) {
+    what = e.what();
+  }
+  ::setrlimit(RLIMIT_FSIZE, &old);
+  std::signal(SIGXFSZ, old_handler);
+  EXPECT_NE(what.find("needs 253.1 KiB of temporary space"), std::string::npos) << what;
+  EXPECT_NE(what.find("21600 corners"), std::string::npos) << what;
+  EXPECT_NE(what.find("TMPDIR"), std::string::npos) << what;
+  EXPECT_FALSE(resolved);
   EXPECT_EQ(entries(work), 0u);
 }
 
