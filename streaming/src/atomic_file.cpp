@@ -68,10 +68,28 @@ std::string system_reason(std::string_view what) {
   return std::string(what) + ": " + std::strerror(errno);
 }
 
+// Where writing `path` lands: the file at the end of its chain of symbolic links (possibly not there yet, for
+// a dangling link), so that the rename replaces that file and keeps the links, as writing through them
+// would. Renaming over the link itself turned it into a regular file, and left its target stale.
+std::filesystem::path link_target(const std::string& path) {
+  namespace fs = std::filesystem;
+  constexpr int kMaxLinks = 40;  // the kernel's own limit on a path's links
+  fs::path at(path);
+  for (int hops = 0; hops < kMaxLinks; ++hops) {
+    std::error_code error;
+    if (!fs::is_symlink(fs::symlink_status(at, error))) return at;
+    const fs::path next = fs::read_symlink(at, error);
+    if (error) throw Error(path, {}, "cannot read the symbolic link " + at.string() + ": " + error.message());
+    at = next.is_absolute() ? next : at.parent_path() / next;
+  }
+  throw Error(path, {}, "too many levels of symbolic links");
+}
+
 }  // namespace
 
-AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), buffer_(buffer_capacity) {
-  const std::filesystem::path target(path_);
+AtomicFile::AtomicFile(std::string path)
+    : path_(std::move(path)), target_path_(link_target(path_).string()), buffer_(buffer_capacity) {
+  const std::filesystem::path target(target_path_);
   const std::filesystem::path folder = target.parent_path().empty() ? "." : target.parent_path();
   std::string temp_name(".");
   temp_name.append(target.filename().string()).append(".tmp.XXXXXX");
@@ -131,7 +149,7 @@ void AtomicFile::commit() {
   // A file replaced keeps its permissions (a private 0600 output stays private); a new one gets the usual
   // ones, where mkstemp made it 0600.
   struct stat existing {};
-  if (::stat(path_.c_str(), &existing) == 0 && S_ISREG(existing.st_mode)) {
+  if (::stat(target_path_.c_str(), &existing) == 0 && S_ISREG(existing.st_mode)) {
     ::fchmod(fd_, existing.st_mode & 07777);
   } else {
     const mode_t mask = ::umask(0);
@@ -143,7 +161,7 @@ void AtomicFile::commit() {
     throw Error(path_, {}, system_reason("close failed"));
   }
   fd_ = -1;
-  if (std::rename(temp_path_.c_str(), path_.c_str()) != 0) {
+  if (std::rename(temp_path_.c_str(), target_path_.c_str()) != 0) {
     throw Error(path_, {}, system_reason("cannot rename the finished temporary into place"));
   }
   committed_ = true;

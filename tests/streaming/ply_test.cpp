@@ -322,6 +322,40 @@ TEST(PlyStreamWriter, AReplacedFileKeepsItsPermissions) {
   EXPECT_EQ(static_cast<unsigned>(fs::status(dir / "new.ply").permissions()), 0666u & ~mask);
 }
 
+// An output path that is a symbolic link used to be renamed over: the link became a regular file and its
+// target kept the old mesh. Writing goes through the links now, as a shell redirection does.
+TEST(PlyStreamWriter, AnOutputThatIsASymbolicLinkIsWrittenThroughIt) {
+  test::TempDir dir;
+  const std::string real = dir / "real.ply", link = dir / "link.ply", chain = dir / "chain.ply";
+  write_mesh(real, test::grid_square(2));
+  fs::create_symlink("real.ply", link);  // relative: to the link's folder
+  fs::create_symlink(link, chain);       // absolute, to another link
+  write_mesh(link, test::grid_square(3));
+  EXPECT_TRUE(fs::is_symlink(link));
+  EXPECT_EQ(read_mesh(real).face_count(), 18u);
+  write_mesh(chain, test::grid_square(4));
+  EXPECT_TRUE(fs::is_symlink(chain));
+  EXPECT_TRUE(fs::is_symlink(link));
+  EXPECT_EQ(read_mesh(real).face_count(), 32u);
+  // A dangling link's target is created.
+  fs::create_directory(dir / "sub");
+  fs::create_symlink("sub/new.ply", dir / "dangling.ply");
+  write_mesh(dir / "dangling.ply", test::grid_square(2));
+  EXPECT_TRUE(fs::is_symlink(dir / "dangling.ply"));
+  EXPECT_EQ(read_mesh(dir / "sub/new.ply").face_count(), 8u);
+  // Links in a loop are an error, and leave nothing.
+  fs::create_symlink("loop_b.ply", dir / "loop_a.ply");
+  fs::create_symlink("loop_a.ply", dir / "loop_b.ply");
+  try {
+    write_mesh(dir / "loop_a.ply", test::grid_square(2));
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("symbolic links"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator()), 7);
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir / "sub"), fs::directory_iterator()), 1);
+}
+
 TEST(PlyStreamWriter, RejectsMisuse) {
   test::TempDir dir;
   PlyLayout layout;

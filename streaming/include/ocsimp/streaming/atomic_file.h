@@ -11,7 +11,8 @@ namespace ocsimp {
 
 // Buffered writer to a hidden temporary file in the target's folder. commit() flushes, closes and renames it
 // over the target; destruction without commit() (an exception, an early return) deletes the temporary. A
-// SIGINT/SIGTERM/SIGHUP handler deletes every live temporary before the process dies.
+// SIGINT/SIGTERM/SIGHUP handler deletes every live temporary before the process dies. A path that is a
+// symbolic link is written through: the target is the file at the end of its links, and they stay links.
 class AtomicFile {
  public:
   explicit AtomicFile(std::string path);
@@ -34,7 +35,8 @@ class AtomicFile {
  private:
   void flush();
 
-  std::string path_;
+  std::string path_;         // as given, for messages
+  std::string target_path_;  // what the rename replaces: path_ with its symbolic links followed
   std::string temp_path_;
   int fd_ = -1;
   std::vector<char> buffer_;
