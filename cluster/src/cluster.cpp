@@ -6,6 +6,7 @@
 #include <limits>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -210,6 +211,21 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
   return out;
 }
 
+std::uint32_t spanned_cells(const std::vector<CellKey>& keys) {
+  if (keys.empty()) return 0;
+  std::array<std::uint32_t, 3> lo = key_coords(keys[0]), hi = lo;
+  for (CellKey key : keys) {
+    const std::array<std::uint32_t, 3> c = key_coords(key);
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], c[a]);
+      hi[a] = std::max(hi[a], c[a]);
+    }
+  }
+  std::uint32_t span = 0;
+  for (int a = 0; a < 3; ++a) span = std::max(span, hi[a] - lo[a] + 1);
+  return span;
+}
+
 int level_for(double cells) {
   // A surface spanning its box occupies about side^2 cells.
   const double side = std::sqrt(std::max(1.0, cells));
@@ -246,6 +262,7 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
   stats.input_triangles = cells.input_triangles;
   stats.fine_cells = cells.size();
   stats.fine_grid = cells.grid.along_longest;
+  stats.spanned_cells = spanned_cells(cells.keys);
   stats.fine_cell_size = cells.grid.cell;
   stats.collapsed_triangles = cells.input_triangles - cells.surviving_instances;
   stats.duplicate_triangles = cells.surviving_instances - cells.triangles.size();

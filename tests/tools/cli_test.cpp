@@ -273,6 +273,34 @@ TEST(Cli, ClusterRefusesAnInputWithoutFaces) {
   }
 }
 
+// --grid counts cells along the box of every vertex; one no face uses, far away, made the whole mesh a
+// single cell, and the run said nothing.
+TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
+  test::TempDir dir;
+  IndexedMesh mesh = test::grid_square(16);  // the unit square
+  const std::string plain = dir / "plain.ply", stretched = dir / "stretched.ply";
+  write_mesh(plain, mesh);
+  mesh.positions.push_back(Vec3f(100, 0, 0));  // no face uses it
+  write_mesh(stretched, mesh);
+  const std::string result = dir / "out.ply", report = dir / "r.json";
+  const CommandResult r =
+      run("cluster -q --grid 8 " + stretched + " -o " + result + " --report " + report, dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("the faces span only 1 of the 8 cells of --grid 8"), std::string::npos) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(file_bytes(report))["cells"]["spanned"], 1);
+  EXPECT_NE(r.err.find("has no faces"), std::string::npos) << r.err;  // one cell: every triangle collapsed
+  // Without the outlier, or with a cell size, nothing to say.
+  const CommandResult p = run("cluster -q --grid 8 " + plain + " -o " + result + " --report " + report, dir);
+  EXPECT_EQ(p.exit_code, 0) << p.err;
+  EXPECT_EQ(p.err.find("span"), std::string::npos) << p.err;
+  EXPECT_GE(nlohmann::json::parse(file_bytes(report))["cells"]["spanned"], 8);
+  EXPECT_GT(read_mesh(result).face_count(), 0u);
+  const CommandResult c = run("cluster -q --cell-size 0.125 " + stretched + " -o " + result, dir);
+  EXPECT_EQ(c.exit_code, 0) << c.err;
+  EXPECT_EQ(c.err.find("span"), std::string::npos) << c.err;
+  EXPECT_GT(read_mesh(result).face_count(), 0u);
+}
+
 TEST(Cli, FailedConvertLeavesNothingBehind) {
   test::TempDir dir;
   const std::string bad = dir / "truncated.ply";

@@ -119,6 +119,7 @@ void add_cluster_command(CLI::App& app) {
                            {"threads", options.threads}};
       report["cells"] = {{"fine", stats.fine_cells},
                          {"fine_grid", stats.fine_grid},
+                         {"spanned", stats.spanned_cells},
                          {"fine_cell_size", stats.fine_cell_size},
                          {"output", stats.output_vertices},
                          {"output_grid", stats.output_grid},
@@ -136,6 +137,15 @@ void add_cluster_command(CLI::App& app) {
           total_seconds > 0 ? static_cast<double>(stats.input_triangles) / total_seconds : 0.0;
       report["peak_rss_bytes"] = peak_rss_bytes();
       write_json_report(flags->report, report);
+    }
+    // A --grid counts cells along the bounding box of every vertex, used or not (the box is known before the
+    // faces are read); an outlier no face uses made bunny --grid 100 a single cell, without a word.
+    if (options.grid > 0 && !(options.cell_size > 0) && !options.octree && options.target_faces == 0 &&
+        2 * std::uint64_t{stats.spanned_cells} < options.grid) {
+      std::fprintf(stderr,
+                   "ocsimp: warning: the faces span only %u of the %u cells of --grid %u: vertices no face "
+                   "uses stretch the bounding box; --cell-size sets the cells' size directly\n",
+                   stats.spanned_cells, options.grid, options.grid);
     }
     if (!stats.target_met) {
       std::fprintf(stderr,

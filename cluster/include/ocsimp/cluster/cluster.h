@@ -125,6 +125,9 @@ struct ClusterStats {
   std::uint64_t input_triangles = 0;  // triangles read
   std::uint64_t fine_cells = 0;       // occupied cells of the grid the pass accumulated on
   std::uint32_t fine_grid = 0;        // that grid's cells along the longest axis
+  // The occupied cells' extent, in cells, along the axis where it is largest: about fine_grid when the faces
+  // span the bounding box; far less when vertices no face uses stretch it (the box is the vertex array's).
+  std::uint32_t spanned_cells = 0;
   double fine_cell_size = 0;
   std::uint64_t output_vertices = 0;  // = clusters
   std::uint64_t output_faces = 0;
