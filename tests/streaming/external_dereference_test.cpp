@@ -3,9 +3,11 @@
 // behind, and report bad input as the plain reader does.
 #include "ocsimp/streaming/external_dereference.h"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <stdlib.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <csignal>
 
@@ -242,6 +244,16 @@ TEST(ExternalDereference, NoRoomForTheCornersFailsBeforeResolvingAndSaysWhy) {
   const std::string& work = folders.work;
   const std::string path = dir / "grid.ply";
   write_mesh(path, shuffled_grid(60));  // 3,721 vertices (44,652 bytes), 7,200 triangles (259,200 bytes)
+  {
+    // A file system that cannot reserve space is written as before, failing only when it is full.
+    const std::string probe = work + "/probe";
+    const int fd = ::open(probe.c_str(), O_CREAT | O_WRONLY, 0600);
+    ASSERT_GE(fd, 0);
+    const bool reserves = ::fallocate(fd, 0, 0, 4096) == 0;
+    ::close(fd);
+    std::filesystem::remove(probe);
+    if (!reserves) GTEST_SKIP() << "the test folder's file system cannot reserve space";
+  }
   rlimit old{};
   ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old), 0);
   // Room for the spooled vertices and the coded faces, not for the corners.
