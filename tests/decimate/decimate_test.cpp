@@ -365,13 +365,21 @@ TEST(Decimate, ASphereSpanningNearlyTheFloatRangeStaysFinite) {
   // output had infinite vertices (the writer then refused it, blaming the output file).
   IndexedMesh sphere = test::sphere(3);
   for (Vec3f& p : sphere.positions) p *= 3e38f;
-  for (std::uint64_t target : {3u, 6u, 20u}) {
+  for (std::uint64_t target : {4u, 6u, 20u}) {
     DecimateOptions o;
     o.target_vertices = target;
     const DecimateResult r = run(sphere, o);
     EXPECT_EQ(r.mesh.vertex_count(), target);
     for (const Vec3f& p : r.mesh.positions) EXPECT_TRUE(p.allFinite()) << target;
   }
+  // Three vertices would close the sphere as one triangle twice over (see ADoubledFaceIsNeverMade): the
+  // tetrahedron before it is as far as it goes, and it says so.
+  DecimateOptions o;
+  o.target_vertices = 3;
+  const DecimateResult r = run(sphere, o);
+  EXPECT_EQ(r.mesh.vertex_count(), 4u);
+  EXPECT_EQ(r.stats.stop, DecimateStop::blocked);
+  for (const Vec3f& p : r.mesh.positions) EXPECT_TRUE(p.allFinite());
 }
 
 TEST(Decimate, ExactCountsOnOpenMesh) {
@@ -555,6 +563,52 @@ TEST(Decimate, NoFaceTurnsOverOnABumpyTorus) {
     const DecimateResult r = run(shape, faces(target));
     EXPECT_EQ(r.mesh.face_count(), target);
     EXPECT_EQ(turned_faces(shape, r.mesh), 0u);
+  }
+}
+
+// Faces on the same three vertices as another face (either winding): a surface doubled back on itself.
+std::size_t doubled_faces(const IndexedMesh& mesh) {
+  std::vector<std::array<Index, 3>> sorted;
+  for (Triangle t : mesh.triangles) {
+    std::sort(t.begin(), t.end());
+    sorted.push_back({t[0], t[1], t[2]});
+  }
+  std::sort(sorted.begin(), sorted.end());
+  return static_cast<std::size_t>(sorted.end() - std::unique(sorted.begin(), sorted.end()));
+}
+
+// Without the link condition, collapses may still not fold a face back onto another: a tetrahedron to 2
+// faces was one triangle written twice with opposite windings and reported as reached, a coarse torus kept
+// three such pairs, and horse.ply at 5,000 faces three (the next test).
+TEST(Decimate, ADoubledFaceIsNeverMade) {
+  IndexedMesh tetrahedron;
+  tetrahedron.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  tetrahedron.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  const DecimateResult tiny = run(tetrahedron, faces(2));
+  EXPECT_EQ(tiny.mesh.face_count(), 4u);
+  EXPECT_EQ(tiny.stats.stop, DecimateStop::blocked);
+  EXPECT_NE(tiny.stats.reason.find("double a triangle"), std::string::npos) << tiny.stats.reason;
+  const IndexedMesh ring = torus(12, 6);
+  for (std::uint64_t target : {60u, 30u, 16u, 10u}) {
+    const DecimateResult r = run(ring, faces(target));
+    EXPECT_EQ(doubled_faces(r.mesh), 0u) << target;
+    EXPECT_GE(r.mesh.face_count() + 1, std::min<std::uint64_t>(target, 16)) << target;
+  }
+  const IndexedMesh ball = test::sphere(2);
+  for (std::uint64_t target : {100u, 40u, 12u, 8u, 6u, 4u, 2u}) {
+    const DecimateResult r = run(ball, faces(target));
+    EXPECT_EQ(doubled_faces(r.mesh), 0u) << target;
+    EXPECT_GE(r.mesh.face_count(), std::max<std::uint64_t>(target - 1, 4)) << target;
+  }
+}
+
+TEST(Decimate, ADoubledFaceIsNeverMadeOnAScan) {
+  OCSIMP_REQUIRE_SHARED_MESH(horse, "horse.ply");
+  const IndexedMesh scan = read_mesh(horse);
+  for (std::uint64_t target : {5000u, 2000u, 200u}) {
+    const DecimateResult r = run(scan, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target);
+    EXPECT_EQ(doubled_faces(r.mesh), 0u) << target;
   }
 }
 

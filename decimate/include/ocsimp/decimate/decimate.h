@@ -11,8 +11,9 @@
 //
 // Guards, checked when a pair reaches the top of the queue: no surrounding triangle may turn by 90 degrees or
 // more in one collapse, or by more than 60 degrees from the input face it started as, or become degenerate
-// (quality below 1e-3 and worse than before); locked borders do not move; with preserve_topology, the link
-// condition holds. A rejected pair is retried when a collapse next to it changes its neighbourhood.
+// (quality below 1e-3 and worse than before), nor end up on the same three vertices as another (a face
+// doubled back on itself); locked borders do not move; with preserve_topology, the link condition holds. A
+// rejected pair is retried when a collapse next to it changes its neighbourhood.
 //
 // Typical use:
 //   ocsimp::DecimateOptions options;
@@ -124,7 +125,7 @@ struct DecimateStats {
   std::uint64_t welded_vertices = 0;  // vertices merged into another by `weld`
   std::uint64_t dropped_degenerate_faces = 0;
   // Rejections of the candidate at the top of the queue, over the whole run.
-  std::uint64_t rejected_flip = 0;      // would flip or degenerate a surrounding triangle
+  std::uint64_t rejected_flip = 0;      // would flip, degenerate or double a surrounding triangle
   std::uint64_t rejected_topology = 0;  // would break the link condition (preserve_topology)
   // The largest cost among the collapses applied, as a distance in model units: sqrt(Q(p) / trace(A)), where
   // Q is the pair's summed quadric, p the placement and trace(A) the total weight of its planes (with area
