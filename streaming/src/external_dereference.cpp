@@ -288,17 +288,8 @@ class VertexSpool {
     for (std::size_t i = 0; i < count; ++i) writer_->push(positions[i]);
   }
 
-  // The vertices, when they fit: one array, built a block at a time so the copy never doubles them.
-  std::vector<Vec3f> take_memory() {
-    std::vector<Vec3f> all;
-    all.reserve(static_cast<std::size_t>(count_));
-    for (std::vector<Vec3f>& block : blocks_) {
-      all.insert(all.end(), block.begin(), block.end());
-      block = {};
-    }
-    blocks_ = {};
-    return all;
-  }
+  // The vertices held in memory, freed (they fit after all; the plain reader loads them again).
+  void release() { blocks_ = {}; }
   bool spilled() const { return file_.has_value(); }
   std::uint64_t count() const { return count_; }
   // The file with every vertex, once the reader is done.
@@ -335,10 +326,19 @@ class DereferencedStream final : public TriangleStream {
     vertex_count_ = spool_.count();
     bytes_total_ = inner_->bytes_total();
     if (!spool_.spilled()) {
-      // They fit after all (OBJ says no count up front): an indexed stream of positions.
-      vertices_.positions = spool_.take_memory();
+      // They fit after all (OBJ says no count up front). The reader above kept positions only, so the file
+      // is read again by the plain one, which keeps its normals, colors and texture coordinates: a second
+      // read of a file that fits, where dropping them went unsaid.
+      spool_.release();
+      ReadOptions plain = options;
+      plain.memory_budget = 0;
+      plain.vertex_sink = nullptr;
+      inner_ = format == FileFormat::ply ? detail::open_ply_stream(path, plain)
+                                         : detail::open_obj_stream(path, plain);
+      plain_ = true;
       return;
     }
+    left_out_ = inner_->attributes_left_out();
     faces_file_.emplace();
     corners_file_.emplace();
     drain_faces();
@@ -371,8 +371,9 @@ class DereferencedStream final : public TriangleStream {
     return true;
   }
 
-  const IndexedMesh& vertices() const override { return vertices_; }
-  Box3 bounds() override { return bounds_; }
+  const IndexedMesh& vertices() const override { return plain_ ? inner_->vertices() : vertices_; }
+  Box3 bounds() override { return plain_ ? inner_->bounds() : bounds_; }
+  std::string attributes_left_out() const override { return left_out_; }
   std::uint64_t triangles_hint() const override { return inner_ ? inner_->triangles_hint() : triangles_; }
   std::uint64_t bytes_read() const override {
     if (inner_) return inner_->bytes_read();
@@ -384,7 +385,7 @@ class DereferencedStream final : public TriangleStream {
   std::uint64_t bytes_total() const override { return bytes_total_; }
   const std::string& path() const override { return path_; }
 
-  bool out_of_core() const { return !inner_; }
+  bool out_of_core() const { return !plain_; }
 
  private:
   // The faces, once, to the index file; counts the corners of each partition.
@@ -444,7 +445,10 @@ class DereferencedStream final : public TriangleStream {
   std::uint64_t budget_;
   ProgressFn progress_;
   VertexSpool spool_;
-  std::unique_ptr<TriangleStream> inner_;  // while the vertices fit: the reader itself
+  // The reader: in sink mode until the faces are on disk; the plain reader when the vertices fit (plain_).
+  std::unique_ptr<TriangleStream> inner_;
+  bool plain_ = false;
+  std::string left_out_;  // what the sink-mode reader left out (TriangleStream::attributes_left_out)
   IndexedMesh vertices_;
   Box3 bounds_;
   std::uint64_t vertex_count_ = 0;

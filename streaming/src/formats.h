@@ -3,6 +3,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/streaming/io.h"
@@ -19,6 +20,19 @@ std::unique_ptr<TriangleStream> open_drc_stream(const std::string& path, const R
 // or nullptr when the file's vertices certainly fit (the caller opens the plain reader).
 std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, FileFormat format,
                                                    const ReadOptions& options);
+
+// "normals, colors and texture coordinates", or the part of it that is true (see
+// TriangleStream::attributes_left_out).
+inline std::string attribute_list(bool normals, bool colors, bool uvs) {
+  std::vector<const char*> names;
+  if (normals) names.push_back("normals");
+  if (colors) names.push_back("colors");
+  if (uvs) names.push_back("texture coordinates");
+  std::string list;
+  for (std::size_t i = 0; i < names.size(); ++i)
+    list.append(i == 0 ? "" : i + 1 == names.size() ? " and " : ", ").append(names[i]);
+  return list;
+}
 
 void write_ply(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options);
 void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options);

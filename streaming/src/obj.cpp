@@ -126,6 +126,10 @@ class ObjStream final : public TriangleStream {
   std::uint64_t bytes_read() const override { return reader_.offset(); }
   std::uint64_t bytes_total() const override { return reader_.file_size(); }
   const std::string& path() const override { return reader_.path(); }
+  std::string attributes_left_out() const override {
+    if (!vertex_sink_) return {};
+    return attribute_list(total_.vn > 0, sink_saw_colors_, total_.vt > 0);
+  }
 
  private:
   [[noreturn]] void fail(const std::string& reason) const {
@@ -245,6 +249,7 @@ class ObjStream final : public TriangleStream {
     }
     if (vertex_sink_) {
       sink_buffer_.push_back(position);
+      sink_saw_colors_ = sink_saw_colors_ || count >= 6;
     } else {
       vertices_.positions.push_back(position);
       const bool has_color = count >= 6;
@@ -427,6 +432,7 @@ class ObjStream final : public TriangleStream {
   ProgressFn progress_;
   // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
   std::function<void(const Vec3f*, std::size_t)> vertex_sink_;
+  bool sink_saw_colors_ = false;  // out of core: a vertex line had colors, which the sink does not take
   OriginSample origin_sample_{{}, /*settled=*/false};  // OBJ text is more precise than floats
   std::vector<Vec3f> sink_buffer_;
   static constexpr std::size_t kSinkChunk = 1 << 16;

@@ -294,6 +294,10 @@ class PlyStream final : public TriangleStream {
   std::uint64_t bytes_read() const override;
   std::uint64_t bytes_total() const override { return bytes_total_; }
   const std::string& path() const override { return reader_.path(); }
+  std::string attributes_left_out() const override {
+    if (!vertex_sink_) return {};
+    return attribute_list(vertex_plan_.normals, vertex_plan_.colors, vertex_plan_.uvs);
+  }
 
  private:
   // -- positions for errors

@@ -284,5 +284,60 @@ TEST(ExternalDereference, NoRoomForTheCornersFailsBeforeResolvingAndSaysWhy) {
   EXPECT_EQ(entries(work), 0u);
 }
 
+// An OBJ has no vertex count up front, so a large enough file is read in sink mode (positions only) until its
+// vertices turn out to fit. The stream then used to deliver positions alone: simplify --memory-limit dropped
+// the normals and texture coordinates of a mesh it held in memory anyway, without a word.
+TEST(ExternalDereference, AnObjThatFitsAfterAllKeepsItsAttributes) {
+  const TestFolders folders;
+  const std::string path = folders.dir / "textured.obj";
+  {
+    std::ofstream out(path);
+    out << "# a square of 2 triangles with colors, uvs and normals, padded with comments\n";
+    for (int i = 0; i < 200; ++i) out << "# padding padding padding padding padding padding\n";
+    out << "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 1 1 0 0 0 1\nv 0 1 0 1 1 1\n"
+           "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+           "f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n";
+  }
+  ReadOptions options;
+  options.memory_budget = 1000;  // the file's size could hold more vertices than that; its 4 take 48 bytes
+  std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+  ASSERT_FALSE(dereferenced_out_of_core(*stream));
+  EXPECT_EQ(stream->attributes_left_out(), "");
+  const IndexedMesh direct = read_mesh(path);
+  ASSERT_FALSE(direct.normals.empty());
+  ASSERT_FALSE(direct.uvs.empty());
+  ASSERT_FALSE(direct.colors.empty());
+  const IndexedMesh through = read_mesh(*stream);
+  EXPECT_EQ(through.positions, direct.positions);
+  EXPECT_EQ(through.normals, direct.normals);
+  EXPECT_EQ(through.uvs, direct.uvs);
+  EXPECT_EQ(through.colors, direct.colors);
+  EXPECT_EQ(through.triangles, direct.triangles);
+}
+
+// Out of core the corners carry positions only; the stream says what it left out, for the warning.
+TEST(ExternalDereference, OutOfCoreSaysWhichAttributesItLeavesOut) {
+  const TestFolders folders;
+  IndexedMesh mesh = shuffled_grid(20);
+  mesh.normals.assign(mesh.positions.size(), Vec3f(0, 0, 1));
+  mesh.colors.assign(mesh.positions.size(), Color{10, 20, 30, 255});
+  const std::string ply = folders.dir / "attributes.ply", obj = folders.dir / "attributes.obj",
+                    plain = folders.dir / "plain.ply";
+  write_mesh(ply, mesh);
+  write_mesh(obj, mesh);
+  write_mesh(plain, shuffled_grid(20));
+  ReadOptions options;
+  options.memory_budget = 120;
+  const auto left_out = [&](const std::string& path) {
+    std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+    EXPECT_TRUE(dereferenced_out_of_core(*stream)) << path;
+    return stream->attributes_left_out();
+  };
+  EXPECT_EQ(left_out(ply), "normals and colors");
+  EXPECT_EQ(left_out(obj), "normals and colors");
+  EXPECT_EQ(left_out(plain), "");
+  EXPECT_EQ(open_triangle_stream(ply)->attributes_left_out(), "");  // in memory: nothing left out
+}
+
 }  // namespace
 }  // namespace ocsimp

@@ -519,6 +519,32 @@ TEST(Cli, SimplifyReportHasTheDocumentedFields) {
   for (const char* field : fields) EXPECT_NE(help.out.find(field), std::string::npos) << field;
 }
 
+// Past the memory limit the vertices are read from disk as positions only; the output lost the input's
+// normals and colors without a word.
+TEST(Cli, SimplifyAndLodSayWhenTheMemoryLimitDropsAttributes) {
+  test::TempDir dir;
+  const std::string mesh = dir / "coloured.ply";
+  const CommandResult g = run("gen -q --triangles 5000 --seed 2 --normals --colors -o " + mesh, dir);
+  ASSERT_EQ(g.exit_code, 0) << g.err;
+  const std::string out = dir / "out.ply";
+  const CommandResult limited =
+      run("simplify -q " + mesh + " -o " + out + " --faces 500 --memory-limit 10000", dir);
+  EXPECT_EQ(limited.exit_code, 0) << limited.err;
+  EXPECT_NE(limited.err.find("coloured.ply: its normals and colors are not in the output"), std::string::npos)
+      << limited.err;
+  EXPECT_TRUE(read_mesh(out).normals.empty());
+  const CommandResult levels =
+      run("lod -q " + mesh + " -o " + (dir / "l_{faces}.ply") + " --faces 500,100 --memory-limit 10000", dir);
+  EXPECT_EQ(levels.exit_code, 0) << levels.err;
+  EXPECT_NE(levels.err.find("its normals and colors are not in the output"), std::string::npos) << levels.err;
+  const CommandResult plain = run("simplify -q " + mesh + " -o " + out + " --faces 500", dir);
+  EXPECT_EQ(plain.exit_code, 0) << plain.err;
+  EXPECT_EQ(plain.err.find("not in the output"), std::string::npos) << plain.err;
+  const IndexedMesh kept = read_mesh(out);
+  EXPECT_EQ(kept.normals.size(), kept.positions.size());
+  EXPECT_EQ(kept.colors.size(), kept.positions.size());
+}
+
 TEST(Cli, SimplifyAndLodWeldATriangleSoupOnRequest) {
   // A sphere whose every triangle has its own three vertices, as some exporters write it. Without --weld its
   // faces share no edge and are decimated as separate triangles (90 % of them deleted); welded, it is one

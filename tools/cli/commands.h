@@ -69,6 +69,10 @@ void check_report_destination(const std::string& report, const std::vector<std::
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
 
+// The warning that the input's vertex attributes (`left_out`, as SimplifyResult lists them) are not in the
+// output; nothing when the list is empty.
+void warn_attributes_left_out(const std::string& input, const std::string& left_out);
+
 double seconds_since(std::chrono::steady_clock::time_point start);
 
 // Keeps every parallel loop of the command, the readers' included, to `threads` cores (at most the

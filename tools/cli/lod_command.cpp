@@ -152,6 +152,7 @@ void add_lod_command(CLI::App& app) {
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);
     }
+    warn_attributes_left_out(flags->input, result.attributes_left_out);
     for (const LodLevel& level : result.levels) {
       if (!level.decimate.target_reached && !level.decimate.reason.empty()) {
         std::fprintf(stderr, "ocsimp: warning: level %llu: %s\n",

@@ -122,6 +122,7 @@ void add_simplify_command(CLI::App& app) {
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);
     }
+    warn_attributes_left_out(flags->input, result.attributes_left_out);
     if (!result.decimate.target_reached && !result.decimate.reason.empty()) {
       std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", result.decimate.reason.c_str());
     }

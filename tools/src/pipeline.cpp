@@ -59,6 +59,7 @@ struct FirstStage {
   QuadricMesh mesh;
   bool clustered = false;
   bool out_of_core = false;
+  std::string attributes_left_out;
   std::uint64_t input_faces = 0;
   std::uint64_t intermediate_faces = 0;
   std::uint64_t cluster_target_faces = 0;  // what the clustering stage was asked for
@@ -94,6 +95,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       std::max<std::uint64_t>(1, static_cast<std::uint64_t>(budget - std::min(budget / 2, cluster_reserve)));
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
   stage.out_of_core = dereferenced_out_of_core(*stream);
+  stage.attributes_left_out = stream->attributes_left_out();
   const double vertex_bytes = static_cast<double>(stream->vertices().positions.size()) * 12.0;
   // OBJ does not say its face count up front; its size does, roughly (at least ~20 bytes a face line).
   std::uint64_t faces_hint = stream->triangles_hint();
@@ -231,6 +233,7 @@ void report_first_stage(FirstStage& stage, Result& result) {
   result.clustered = stage.clustered;
   result.cluster_error = intermediate_error(stage);
   result.out_of_core = stage.out_of_core;
+  result.attributes_left_out = std::move(stage.attributes_left_out);
   result.input_faces = stage.input_faces;
   result.intermediate_faces = stage.intermediate_faces;
   result.phases = std::move(stage.phases);

@@ -45,8 +45,8 @@ class TriangleStream {
   // The vertex array, writable, for the one consumer that makes its single pass over this stream and reuses
   // the array's memory as scratch (the cluster stage packs each vertex's cell into its 12 bytes, to stay
   // within 12 bytes a vertex). Afterwards vertices() holds that consumer's data, not positions. While batches
-  // remain the array's sizes must be kept; once next() has returned false the consumer may release it. Streams
-  // never read their vertex array back after loading it, so next() is unaffected.
+  // remain the array's sizes must be kept; once next() has returned false the consumer may release it.
+  // Streams never read their vertex array back after loading it, so next() is unaffected.
   IndexedMesh& scratch_vertices() { return const_cast<IndexedMesh&>(vertices()); }
 
   // Bounding box of every vertex. Known up front for indexed streams; a soup may scan its input once for it.
@@ -61,6 +61,10 @@ class TriangleStream {
   virtual std::uint64_t bytes_total() const = 0;
 
   virtual const std::string& path() const = 0;
+
+  // Vertex attributes the file has that this stream does not deliver, as a list ("normals and colors"): an
+  // out-of-core stream delivers corner positions only. Empty when nothing is left out.
+  virtual std::string attributes_left_out() const { return {}; }
 };
 
 }  // namespace ocsimp

@@ -82,6 +82,9 @@ struct SimplifyResult {
   double max_error() const { return std::max(cluster_error, decimate.max_error); }
   std::uint64_t memory_limit = 0;  // the budget in force
   bool out_of_core = false;        // the input's vertices were dereferenced on disk (io.h, memory_budget)
+  // The input's vertex attributes that the out-of-core reading left out, as a list ("normals and colors"); empty
+  // when the result carries all the input has.
+  std::string attributes_left_out;
 };
 
 // Runs the pipeline on a file (any format ocsimp reads). Throws Error on bad input or impossible options.
@@ -127,6 +130,7 @@ struct LodResult {
   double cluster_error = 0;  // as in SimplifyResult; every level's max_error starts from it
   std::uint64_t memory_limit = 0;
   bool out_of_core = false;
+  std::string attributes_left_out;  // as in SimplifyResult
 };
 
 // One read of the input (in core or clustered, as simplify() decides for the largest level), then each level
