@@ -2363,7 +2363,7 @@ struct Decimator {
       stats.stop = below ? DecimateStop::parity : DecimateStop::target_reached;
       stats.reason = "reached " + reached_text +
                      (below ? " (the face target " + std::to_string(target_f) +
-                                  " is unreachable: every remaining collapse removes two faces)"
+                                  " is unreachable: no remaining collapse removes a single face)"
                             : "");
       return;
     }

@@ -108,7 +108,7 @@ struct DecimateOptions {
 
 enum class DecimateStop {
   target_reached,  // the face or vertex target was met exactly
-  parity,          // a face target was met one below (every remaining candidate removes two faces)
+  parity,          // a face target was met one below (no remaining candidate removes a single face)
   max_error,       // every remaining candidate would exceed max_error
   blocked,         // every remaining candidate is rejected by a guard (see DecimateStats::reason)
   exhausted,       // a count target was not met and no candidate pair is left at all
