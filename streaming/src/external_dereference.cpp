@@ -333,9 +333,7 @@ class DereferencedStream final : public TriangleStream {
       ReadOptions plain = options;
       plain.memory_budget = 0;
       plain.vertex_sink = nullptr;
-      inner_ = format == FileFormat::ply ? detail::open_ply_stream(path, plain)
-                                         : detail::open_obj_stream(path, plain);
-      plain_ = true;
+      inner_ = open_triangle_stream(path, plain);
       return;
     }
     left_out_ = inner_->attributes_left_out();
@@ -371,8 +369,8 @@ class DereferencedStream final : public TriangleStream {
     return true;
   }
 
-  const IndexedMesh& vertices() const override { return plain_ ? inner_->vertices() : vertices_; }
-  Box3 bounds() override { return plain_ ? inner_->bounds() : bounds_; }
+  const IndexedMesh& vertices() const override { return inner_ ? inner_->vertices() : vertices_; }
+  Box3 bounds() override { return inner_ ? inner_->bounds() : bounds_; }
   std::string attributes_left_out() const override { return left_out_; }
   std::uint64_t triangles_hint() const override { return inner_ ? inner_->triangles_hint() : triangles_; }
   std::uint64_t bytes_read() const override {
@@ -385,7 +383,7 @@ class DereferencedStream final : public TriangleStream {
   std::uint64_t bytes_total() const override { return bytes_total_; }
   const std::string& path() const override { return path_; }
 
-  bool out_of_core() const { return !plain_; }
+  bool out_of_core() const { return !inner_; }
 
  private:
   // The faces, once, to the index file; counts the corners of each partition.
@@ -445,9 +443,9 @@ class DereferencedStream final : public TriangleStream {
   std::uint64_t budget_;
   ProgressFn progress_;
   VertexSpool spool_;
-  // The reader: in sink mode until the faces are on disk; the plain reader when the vertices fit (plain_).
+  // Once constructed: the plain reader when the vertices fit, null when the faces are on disk (while
+  // constructing, the reader in sink mode).
   std::unique_ptr<TriangleStream> inner_;
-  bool plain_ = false;
   std::string left_out_;  // what the sink-mode reader left out (TriangleStream::attributes_left_out)
   IndexedMesh vertices_;
   Box3 bounds_;
