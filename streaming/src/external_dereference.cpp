@@ -92,15 +92,17 @@ class TempFile {
       error = ::fallocate(fd_, 0, 0, static_cast<off_t>(size)) == 0 ? 0 : errno;
     } while (error == EINTR);
     if (error == 0 || error == EOPNOTSUPP || error == ENOSYS) return;
-    std::string reason = "out-of-core reading needs " + format_bytes(size) + " of temporary space for " +
-                         what + " and could not reserve it: " + std::strerror(error);
-    if (error == ENOSPC || error == EFBIG) reason += " (set TMPDIR to a folder on a disk with more room)";
-    throw Error(temp_dir(), {}, reason);
+    throw_system_error("out-of-core reading needs " + format_bytes(size) + " of temporary space for " + what +
+                           " and could not reserve it",
+                       error);
   }
 
  private:
   [[noreturn]] static void fail(const char* what, int error) {
-    std::string reason = std::string("out-of-core reading: ") + what + " a temporary file failed";
+    throw_system_error(std::string("out-of-core reading: ") + what + " a temporary file failed", error);
+  }
+  // `reason`, then the system's word for `error` (none for 0) and, for a full disk, the way out.
+  [[noreturn]] static void throw_system_error(std::string reason, int error) {
     if (error != 0) reason += std::string(": ") + std::strerror(error);
     if (error == ENOSPC || error == EFBIG) reason += " (set TMPDIR to a folder on a disk with more room)";
     throw Error(temp_dir(), {}, reason);
