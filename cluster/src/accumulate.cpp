@@ -1294,6 +1294,60 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
 // What a soup pass says of a NaN or infinite corner, wherever it meets one first.
 constexpr const char* kNonFiniteCorner = "a triangle has a non-finite corner";
 
+// A soup's corner attributes (those its stream carries: TriangleBatch::corner_normals and the others)
+// summed per cell, as an indexed pass sums its vertices' attributes.
+struct SoupAttributes {
+  bool normals = false, colors = false, uvs = false;
+  std::vector<Vec3f> normal_sum;
+  std::vector<std::array<std::uint64_t, 4>> color_sum;
+  std::vector<Vec2d> uv_sum;
+
+  // Which attributes a batch with triangles carries; throws when it carries one for only some corners.
+  static SoupAttributes carried_by(const TriangleBatch& batch, const std::string& path) {
+    const std::size_t n = batch.corners.size();
+    auto carried = [&](std::size_t size) {
+      if (size != 0 && size != n)
+        throw Error(path, {}, "a triangle soup stream delivered corner attributes for only some corners");
+      return size == n;
+    };
+    SoupAttributes a;
+    a.normals = carried(batch.corner_normals.size());
+    a.colors = carried(batch.corner_colors.size());
+    a.uvs = carried(batch.corner_uvs.size());
+    return a;
+  }
+  bool same_kinds(const SoupAttributes& other) const {
+    return normals == other.normals && colors == other.colors && uvs == other.uvs;
+  }
+  void same_as(const SoupAttributes& other) {
+    normals = other.normals, colors = other.colors, uvs = other.uvs;
+  }
+  void push_back() {
+    if (normals) normal_sum.emplace_back(Vec3f::Zero());
+    if (colors) color_sum.push_back({0, 0, 0, 0});
+    if (uvs) uv_sum.emplace_back(Vec2d::Zero());
+  }
+  void clear() {
+    normal_sum.clear();
+    color_sum.clear();
+    uv_sum.clear();
+  }
+  void add_corner(std::uint32_t s, const TriangleBatch& batch, std::size_t t, int k) {
+    if (normals) normal_sum[s] += batch.corner_normals[t][k];
+    if (colors) {
+      for (int c = 0; c < 4; ++c) color_sum[s][c] += batch.corner_colors[t][k][c];
+    }
+    if (uvs) uv_sum[s] += batch.corner_uvs[t][k].cast<double>();
+  }
+  void add(std::uint32_t i, const SoupAttributes& from, std::uint32_t j) {
+    if (normals) normal_sum[i] += from.normal_sum[j];
+    if (colors) {
+      for (int c = 0; c < 4; ++c) color_sum[i][c] += from.color_sum[j][c];
+    }
+    if (uvs) uv_sum[i] += from.uv_sum[j];
+  }
+};
+
 // One chunk of a triangle soup: partial sums of the cells it touches, by cell key, and its surviving
 // triangles.
 struct SoupChunk {
@@ -1301,6 +1355,7 @@ struct SoupChunk {
   std::vector<CellRecord> records;
   std::vector<std::uint32_t> points;
   std::vector<Vec3f> point_sum;
+  SoupAttributes attributes;
   std::vector<CellTriple<CellKey>> survivors;
 
   std::uint32_t slot(CellKey key) {
@@ -1310,6 +1365,7 @@ struct SoupChunk {
       records.emplace_back();
       points.push_back(0);
       point_sum.emplace_back(Vec3f::Zero());
+      attributes.push_back();
     }
     return s;
   }
@@ -1320,6 +1376,7 @@ struct SoupChunk {
     records.clear();
     points.clear();
     point_sum.clear();
+    attributes.clear();
     survivors.clear();
   }
 };
@@ -1331,6 +1388,7 @@ struct SoupCells {
   CellMap map;
   std::vector<CellKey> keys;
   CellStore<std::int32_t> store;
+  SoupAttributes attributes;
 
   std::uint32_t number(CellKey key) {
     bool inserted;
@@ -1339,18 +1397,21 @@ struct SoupCells {
       check_cell_count(keys.size() + 1);
       keys.push_back(key);
       store.push_back();
+      attributes.push_back();
     }
     return i;
   }
-  // Adds partial sums to cell i; `touched`: some triangle touched the part.
+  // Adds partial sums to cell i, its attributes' from entry j of `from`; `touched`: some triangle touched the
+  // part.
   void add(std::uint32_t i, const CellRecord& part, bool touched, std::uint32_t points,
-           const Vec3f& point_sum) {
+           const Vec3f& point_sum, const SoupAttributes& from, std::uint32_t j) {
     store.add(i, part);
     if (touched) store.touch(i);
-    // A cell's mean stays that of the points counted, should its count ever saturate.
+    // A cell's means stay those of the points counted, should its count ever saturate.
     if (store.points[i] <= std::numeric_limits<std::uint32_t>::max() - points) {
       store.points[i] += points;
       store.point_sum[i] += point_sum;
+      attributes.add(i, from, j);
     }
   }
 };
@@ -1365,6 +1426,7 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
   grid = grid.coarser();
   SoupCells parents;
   parents.map = CellMap(cells.keys.size() / 4);
+  parents.attributes.same_as(cells.attributes);
   for (std::size_t i = 0; i < cells.keys.size(); ++i) {
     const auto c = key_coords(cells.keys[i]);
     const Vec3f offset(static_cast<float>(c[0] & 1), static_cast<float>(c[1] & 1),
@@ -1391,7 +1453,8 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
     const std::uint32_t points = cells.store.points[i];
     parents.add(parents.number(parent_key(cells.keys[i])), part,
                 CellStore<std::int32_t>::touched(part.quadric), points,
-                0.5f * (cells.store.point_sum[i] + static_cast<float>(points) * offset));
+                0.5f * (cells.store.point_sum[i] + static_cast<float>(points) * offset), cells.attributes,
+                static_cast<std::uint32_t>(i));
   }
   std::vector<CellTriple<CellKey>> triples;
   survivors.drain_into(triples);
@@ -1463,6 +1526,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   }
   Grid grid = cells.grid;
   SoupCells seen;
+  bool attributes_known = false;  // set by the first batch with triangles
   TripleSet<CellKey> survivors;
   std::vector<SoupChunk> chunks;
   auto first = [&](const TriangleBatch& batch) {
@@ -1473,11 +1537,21 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     if (!batch.triangles.empty()) {
       throw Error(stream.path(), {}, "a triangle soup stream delivered indexed triangles");
     }
+    if (!batch.corners.empty()) {
+      const SoupAttributes carried = SoupAttributes::carried_by(batch, stream.path());
+      if (!attributes_known) {
+        seen.attributes.same_as(carried);
+        attributes_known = true;
+      } else if (!seen.attributes.same_kinds(carried)) {
+        throw Error(stream.path(), {}, "a triangle soup stream changed the corner attributes it delivers");
+      }
+    }
     const std::size_t n = (batch.corners.size() + kChunkTriangles - 1) / kChunkTriangles;
     if (chunks.size() < n) chunks.resize(n);
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
       SoupChunk& chunk = chunks[j];
       chunk.clear();
+      chunk.attributes.same_as(seen.attributes);
       const std::size_t end = std::min(batch.corners.size(), (j + 1) * kChunkTriangles);
       for (std::size_t i = j * kChunkTriangles; i < end; ++i) {
         const auto& corners = batch.corners[i];
@@ -1492,6 +1566,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
           f.index[k] = s;
           ++chunk.points[s];
           chunk.point_sum[s] += local.cast<float>();
+          chunk.attributes.add_corner(s, batch, i, k);
           for (int a = 0; a < 3; ++a) f.p[k][a] = p[a], f.local[k][a] = local[a];
         }
         f.set_cross();
@@ -1508,7 +1583,8 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
       const SoupChunk& chunk = chunks[j];
       const std::vector<CellKey>& ids = chunk.table.ids();
       for (std::uint32_t s = 0; s < ids.size(); ++s) {
-        seen.add(seen.number(ids[s]), chunk.records[s], true, chunk.points[s], chunk.point_sum[s]);
+        seen.add(seen.number(ids[s]), chunk.records[s], true, chunk.points[s], chunk.point_sum[s],
+                 chunk.attributes, s);
       }
       for (const CellTriple<CellKey>& t : chunk.survivors) survivors.add(t);
       cells.surviving_instances += chunk.survivors.size();
@@ -1535,6 +1611,10 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   if (options.boundary) cells.border.resize(count);
   sorted.points.resize(count);
   sorted.point_sum.resize(count);
+  const SoupAttributes& attributes = seen.attributes;
+  if (attributes.normals) cells.normal_sum.resize(count);
+  if (attributes.colors) cells.color_sum.resize(count);
+  if (attributes.uvs) cells.uv_sum.resize(count);
   CellMap numbering(count);
   for (std::size_t i = 0; i < count; ++i) {
     const std::uint32_t from = entries[i].second;
@@ -1546,12 +1626,16 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     }
     sorted.points[i] = store.points[from];
     sorted.point_sum[i] = store.point_sum[from];
+    if (attributes.normals) cells.normal_sum[i] = attributes.normal_sum[from];
+    if (attributes.colors) cells.color_sum[i] = attributes.color_sum[from];
+    if (attributes.uvs) cells.uv_sum[i] = attributes.uv_sum[from];
     bool inserted;
     numbering.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);
   }
   entries = {};
   keys = {};
   store = {};
+  seen.attributes = {};
   std::vector<CellTriple<CellKey>> triples;
   survivors.drain_into(triples);
   for (const CellTriple<CellKey>& k : triples) {

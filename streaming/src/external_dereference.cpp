@@ -22,16 +22,62 @@ namespace {
 
 static_assert(sizeof(Vec3f) == 12 && sizeof(Triangle) == 12);
 
+// A position: what the budget counts per vertex of an OBJ, whose attributes are not known up front.
 constexpr std::uint64_t kVertexBytes = 12;
 // Enough partitions for a budget 64 times smaller than the vertex array; a smaller budget is exceeded (each
 // partition then holds 1/64 of the vertices) rather than the time growing with it: each partition is one
 // more scan of the faces file. With up to 4096 partitions, a 3 M-triangle scan under a 1 KiB limit took
 // 4096 scans of its 36 MB faces file, and ran for minutes.
 constexpr std::uint64_t kMaxPartitions = 64;
-constexpr std::size_t kBufferRecords = (1 << 20) / 12;
-constexpr std::size_t kMinBufferRecords = 4096 / 12;
 constexpr std::size_t kBufferBytes = 1 << 20;
+constexpr std::size_t kMinBufferBytes = 4096;
 constexpr std::size_t kSpoolBlock = 1 << 20;  // vertices
+
+// A spooled vertex and a dereferenced corner are the same record: the position, then each attribute the
+// reader delivers (a PLY's normals, colors and texture coordinates), packed.
+struct RecordLayout {
+  bool normals = false, colors = false, uvs = false;
+
+  static RecordLayout of(const VertexChunk& chunk) {
+    return {!chunk.normals.empty(), !chunk.colors.empty(), !chunk.uvs.empty()};
+  }
+  bool operator==(const RecordLayout&) const = default;
+  std::size_t bytes() const { return vertex_bytes(normals, colors, uvs); }
+  // Vertex i of `chunk` into `out` (bytes() of room).
+  void pack(const VertexChunk& chunk, std::size_t i, std::uint8_t* out) const {
+    out = put(out, chunk.positions[i]);
+    if (normals) out = put(out, chunk.normals[i]);
+    if (colors) out = put(out, chunk.colors[i]);
+    if (uvs) put(out, chunk.uvs[i]);
+  }
+  // Corner k of the batch's last triangle from `in`.
+  void unpack(const std::uint8_t* in, TriangleBatch& batch, int k) const {
+    in = get(in, batch.corners.back()[k]);
+    if (normals) in = get(in, batch.corner_normals.back()[k]);
+    if (colors) in = get(in, batch.corner_colors.back()[k]);
+    if (uvs) get(in, batch.corner_uvs.back()[k]);
+  }
+  // Room in `batch` for one more triangle's corners.
+  void grow(TriangleBatch& batch) const {
+    batch.corners.emplace_back();
+    if (normals) batch.corner_normals.emplace_back();
+    if (colors) batch.corner_colors.emplace_back();
+    if (uvs) batch.corner_uvs.emplace_back();
+  }
+
+ private:
+  template <class T>
+  static std::uint8_t* put(std::uint8_t* out, const T& value) {
+    std::memcpy(out, &value, sizeof(T));
+    return out + sizeof(T);
+  }
+  template <class T>
+  static const std::uint8_t* get(const std::uint8_t* in, T& value) {
+    std::memcpy(static_cast<void*>(&value), in, sizeof(T));  // Eigen vectors of floats: plain bytes
+    return in + sizeof(T);
+  }
+};
+static_assert(sizeof(Color) == 4 && sizeof(Vec2f) == 8);
 
 std::string temp_dir() {
   const char* dir = std::getenv("TMPDIR");
@@ -111,41 +157,51 @@ class TempFile {
   int fd_ = -1;
 };
 
-// Appends fixed-size records from `offset` on through a buffer.
-template <class T>
+// Appends records of `record` bytes from `offset` on through a buffer of about `buffer_bytes`.
 class RecordWriter {
  public:
-  RecordWriter(const TempFile& file, std::uint64_t offset, std::size_t buffer_records)
-      : file_(&file), offset_(offset), capacity_(std::max<std::size_t>(buffer_records, 1)) {
-    buffer_.reserve(capacity_);
-  }
-  void push(const T& record) {
-    buffer_.push_back(record);
-    if (buffer_.size() == capacity_) flush();
+  RecordWriter(const TempFile& file, std::uint64_t offset, std::size_t record, std::size_t buffer_bytes)
+      : file_(&file),
+        offset_(offset),
+        record_(record),
+        buffer_(std::max(buffer_bytes / record, std::size_t{1}) * record) {}
+  // Room for the next record, which the caller fills.
+  std::uint8_t* push() {
+    if (used_ == buffer_.size()) flush();
+    std::uint8_t* slot = buffer_.data() + used_;
+    used_ += record_;
+    return slot;
   }
   void flush() {
-    if (buffer_.empty()) return;
-    file_->write_at(offset_, buffer_.data(), buffer_.size() * sizeof(T));
-    offset_ += buffer_.size() * sizeof(T);
-    buffer_.clear();
+    if (used_ == 0) return;
+    file_->write_at(offset_, buffer_.data(), used_);
+    offset_ += used_;
+    used_ = 0;
   }
 
  private:
   const TempFile* file_;
   std::uint64_t offset_;
-  std::size_t capacity_;
-  std::vector<T> buffer_;
+  std::size_t record_;
+  std::vector<std::uint8_t> buffer_;
+  std::size_t used_ = 0;
 };
 
-// Reads `count` fixed-size records from `offset` on through a buffer.
-template <class T>
+// Reads `count` records of `record` bytes from `offset` on through a buffer of about `buffer_bytes`.
 class RecordReader {
  public:
-  RecordReader(const TempFile& file, std::uint64_t offset, std::uint64_t count, std::size_t buffer_records)
-      : file_(&file), offset_(offset), left_(count), capacity_(std::max<std::size_t>(buffer_records, 1)) {}
-  const T& next() {
-    if (cursor_ == buffer_.size()) refill();
-    return buffer_[cursor_++];
+  RecordReader(const TempFile& file, std::uint64_t offset, std::uint64_t count, std::size_t record,
+               std::size_t buffer_bytes)
+      : file_(&file),
+        offset_(offset),
+        left_(count),
+        record_(record),
+        capacity_(std::max(buffer_bytes / record, std::size_t{1})) {}
+  const std::uint8_t* next() {
+    if (cursor_ == end_) refill();
+    const std::uint8_t* record = buffer_.data() + cursor_;
+    cursor_ += record_;
+    return record;
   }
 
  private:
@@ -153,19 +209,21 @@ class RecordReader {
     if (left_ == 0)
       throw Error(temp_dir(), {}, "out-of-core reading: a temporary file holds fewer records than written");
     const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(left_, capacity_));
-    buffer_.resize(n);
-    file_->read_at(offset_, buffer_.data(), n * sizeof(T));
-    offset_ += n * sizeof(T);
+    buffer_.resize(n * record_);
+    file_->read_at(offset_, buffer_.data(), n * record_);
+    offset_ += n * record_;
     left_ -= n;
     cursor_ = 0;
+    end_ = n * record_;
   }
 
   const TempFile* file_;
   std::uint64_t offset_;
   std::uint64_t left_;
-  std::size_t capacity_;
-  std::vector<T> buffer_;
-  std::size_t cursor_ = 0;
+  std::size_t record_;
+  std::size_t capacity_;  // records
+  std::vector<std::uint8_t> buffer_;
+  std::size_t cursor_ = 0, end_ = 0;
 };
 
 // The faces file holds each vertex id as the zigzag varint of its difference from the one before: a mesh's
@@ -255,45 +313,52 @@ class FaceReader {
 // Where the reader's vertices go: memory while they fit the budget, a temporary file once they do not.
 class VertexSpool {
  public:
-  explicit VertexSpool(std::uint64_t budget_bytes)
-      : capacity_(std::max<std::uint64_t>(budget_bytes / kVertexBytes, 1)) {}
+  explicit VertexSpool(std::uint64_t budget_bytes) : budget_(budget_bytes) {}
 
-  void add(const Vec3f* positions, std::size_t count) {
+  void add(const VertexChunk& chunk) {
+    if (count_ == 0 && !file_) {
+      // The first chunk says what the records carry; held in memory, they take the budget's bytes.
+      layout_ = RecordLayout::of(chunk);
+      capacity_ = std::max<std::uint64_t>(budget_ / layout_.bytes(), 1);
+    } else if (!(RecordLayout::of(chunk) == layout_)) {
+      throw Error(temp_dir(), {}, "out-of-core reading: the reader changed the attributes it delivers");
+    }
+    const std::size_t record = layout_.bytes();
+    const std::size_t count = chunk.positions.size();
     count_ += count;
     if (!file_ && count_ <= capacity_) {
       // In blocks, not one growing vector: its reallocation would hold the old and the new array at once,
       // up to 1.5x the budget.
-      while (count > 0) {
-        if (blocks_.empty() || blocks_.back().size() == kSpoolBlock) {
+      for (std::size_t i = 0; i < count; ++i) {
+        if (blocks_.empty() || blocks_.back().size() == kSpoolBlock * record) {
           blocks_.emplace_back();
-          blocks_.back().reserve(kSpoolBlock);
+          blocks_.back().reserve(kSpoolBlock * record);
         }
-        std::vector<Vec3f>& block = blocks_.back();
-        const std::size_t n = std::min(count, kSpoolBlock - block.size());
-        block.insert(block.end(), positions, positions + n);
-        positions += n;
-        count -= n;
+        std::vector<std::uint8_t>& block = blocks_.back();
+        block.resize(block.size() + record);
+        layout_.pack(chunk, i, block.data() + block.size() - record);
       }
       return;
     }
     if (!file_) {
       file_.emplace();
       std::uint64_t offset = 0;
-      for (std::vector<Vec3f>& block : blocks_) {
-        file_->write_at(offset, block.data(), block.size() * sizeof(Vec3f));
-        offset += block.size() * sizeof(Vec3f);
+      for (std::vector<std::uint8_t>& block : blocks_) {
+        file_->write_at(offset, block.data(), block.size());
+        offset += block.size();
         block = {};
       }
       blocks_ = {};
-      writer_.emplace(*file_, offset, kBufferRecords);
+      writer_.emplace(*file_, offset, record, kBufferBytes);
     }
-    for (std::size_t i = 0; i < count; ++i) writer_->push(positions[i]);
+    for (std::size_t i = 0; i < count; ++i) layout_.pack(chunk, i, writer_->push());
   }
 
   // The vertices held in memory, freed (they fit after all; the plain reader loads them again).
   void release() { blocks_ = {}; }
   bool spilled() const { return file_.has_value(); }
   std::uint64_t count() const { return count_; }
+  const RecordLayout& layout() const { return layout_; }
   // The file with every vertex, once the reader is done.
   const TempFile& file() {
     writer_->flush();
@@ -301,11 +366,13 @@ class VertexSpool {
   }
 
  private:
-  std::uint64_t capacity_;
+  std::uint64_t budget_;
+  RecordLayout layout_;
+  std::uint64_t capacity_ = 1;  // records
   std::uint64_t count_ = 0;
-  std::vector<std::vector<Vec3f>> blocks_;
+  std::vector<std::vector<std::uint8_t>> blocks_;
   std::optional<TempFile> file_;
-  std::optional<RecordWriter<Vec3f>> writer_;
+  std::optional<RecordWriter> writer_;
 };
 
 class DereferencedStream final : public TriangleStream {
@@ -318,9 +385,7 @@ class DereferencedStream final : public TriangleStream {
         spool_(budget_) {
     ReadOptions inner_options = options;
     inner_options.memory_budget = 0;
-    inner_options.vertex_sink = [this](const Vec3f* positions, std::size_t count) {
-      spool_.add(positions, count);
-    };
+    inner_options.vertex_sink = [this](const VertexChunk& chunk) { spool_.add(chunk); };
     inner_ = format == FileFormat::ply ? detail::open_ply_stream(path, inner_options)
                                        : detail::open_obj_stream(path, inner_options);
     bounds_ = inner_->bounds();
@@ -339,12 +404,16 @@ class DereferencedStream final : public TriangleStream {
       return;
     }
     left_out_ = inner_->attributes_left_out();
+    layout_ = spool_.layout();
+    record_ = layout_.bytes();
     faces_file_.emplace();
     corners_file_.emplace();
     drain_faces();
     inner_.reset();
-    corners_file_->reserve(3 * triangles_ * sizeof(Vec3f),
-                           "the positions of " + std::to_string(3 * triangles_) + " corners");
+    corners_file_->reserve(
+        3 * triangles_ * record_,
+        (record_ == sizeof(Vec3f) ? "the positions of " : "the positions and attributes of ") +
+            std::to_string(3 * triangles_) + " corners");
     resolve_partitions();
   }
 
@@ -355,17 +424,16 @@ class DereferencedStream final : public TriangleStream {
     if (!face_reader_) {
       face_reader_.emplace(*faces_file_, face_bytes_, kBufferBytes);
       // Every partition's region is read at once: their buffers share the budget.
-      const std::size_t buffer = static_cast<std::size_t>(std::clamp<std::uint64_t>(
-          budget_ / kVertexBytes / (partitions_ + 1), kMinBufferRecords, kBufferRecords));
+      const std::size_t buffer = static_cast<std::size_t>(
+          std::clamp<std::uint64_t>(budget_ / (partitions_ + 1), kMinBufferBytes, kBufferBytes));
       corner_readers_.reserve(partitions_);
       for (std::size_t p = 0; p < partitions_; ++p)
-        corner_readers_.emplace_back(*corners_file_, region_offset_[p], corner_counts_[p], buffer);
+        corner_readers_.emplace_back(*corners_file_, region_offset_[p], corner_counts_[p], record_, buffer);
     }
     while (batch.corners.size() < capacity_ && emitted_ < triangles_) {
       const Triangle t = face_reader_->next();
-      batch.corners.push_back({corner_readers_[t[0] / part_size_].next(),
-                               corner_readers_[t[1] / part_size_].next(),
-                               corner_readers_[t[2] / part_size_].next()});
+      layout_.grow(batch);
+      for (int k = 0; k < 3; ++k) layout_.unpack(corner_readers_[t[k] / part_size_].next(), batch, k);
       ++emitted_;
     }
     return true;
@@ -391,7 +459,7 @@ class DereferencedStream final : public TriangleStream {
   // The faces, once, to the index file; counts the corners of each partition.
   void drain_faces() {
     part_size_ = std::max<std::uint64_t>(
-        {budget_ / kVertexBytes, (vertex_count_ + kMaxPartitions - 1) / kMaxPartitions, std::uint64_t{1}});
+        {budget_ / record_, (vertex_count_ + kMaxPartitions - 1) / kMaxPartitions, std::uint64_t{1}});
     partitions_ = static_cast<std::size_t>((vertex_count_ + part_size_ - 1) / part_size_);
     corner_counts_.assign(partitions_, 0);
     FaceWriter writer(*faces_file_, kBufferBytes);
@@ -419,20 +487,20 @@ class DereferencedStream final : public TriangleStream {
   void resolve_partitions() {
     region_offset_.assign(partitions_, 0);
     for (std::size_t p = 1; p < partitions_; ++p)
-      region_offset_[p] = region_offset_[p - 1] + corner_counts_[p - 1] * sizeof(Vec3f);
+      region_offset_[p] = region_offset_[p - 1] + corner_counts_[p - 1] * record_;
     const TempFile& vertex_file = spool_.file();
-    std::vector<Vec3f> part;
+    std::vector<std::uint8_t> part;
     for (std::size_t p = 0; p < partitions_; ++p) {
       const std::uint64_t first = p * part_size_;
       const std::uint64_t size = std::min(part_size_, vertex_count_ - first);
-      part.resize(static_cast<std::size_t>(size));
-      vertex_file.read_at(first * sizeof(Vec3f), part.data(), part.size() * sizeof(Vec3f));
+      part.resize(static_cast<std::size_t>(size * record_));
+      vertex_file.read_at(first * record_, part.data(), part.size());
       FaceReader faces(*faces_file_, face_bytes_, kBufferBytes);
-      RecordWriter<Vec3f> corners(*corners_file_, region_offset_[p], kBufferRecords);
+      RecordWriter corners(*corners_file_, region_offset_[p], record_, kBufferBytes);
       for (std::uint64_t f = 0; f < triangles_; ++f) {
         for (Index v : faces.next()) {
           const std::uint64_t local = v - first;  // wraps past the end for ids below `first`
-          if (local < size) corners.push(part[static_cast<std::size_t>(local)]);
+          if (local < size) std::memcpy(corners.push(), part.data() + local * record_, record_);
         }
       }
       corners.flush();
@@ -449,6 +517,8 @@ class DereferencedStream final : public TriangleStream {
   // constructing, the reader in sink mode).
   std::unique_ptr<TriangleStream> inner_;
   std::string left_out_;  // what the sink-mode reader left out (TriangleStream::attributes_left_out)
+  RecordLayout layout_;   // what a spooled vertex and a corner carry
+  std::size_t record_ = sizeof(Vec3f);
   IndexedMesh vertices_;
   Box3 bounds_;
   std::uint64_t vertex_count_ = 0;
@@ -456,7 +526,7 @@ class DereferencedStream final : public TriangleStream {
 
   std::optional<TempFile> faces_file_;  // the faces' vertex ids, coded (FaceWriter)
   std::uint64_t face_bytes_ = 0;
-  std::optional<TempFile> corners_file_;  // corner positions, grouped by the partition of their vertex
+  std::optional<TempFile> corners_file_;  // corner records, grouped by the partition of their vertex
   std::uint64_t triangles_ = 0;
   std::uint64_t part_size_ = 1;
   std::size_t partitions_ = 0;
@@ -464,7 +534,7 @@ class DereferencedStream final : public TriangleStream {
   std::vector<std::uint64_t> region_offset_;
 
   std::optional<FaceReader> face_reader_;
-  std::vector<RecordReader<Vec3f>> corner_readers_;
+  std::vector<RecordReader> corner_readers_;
   std::uint64_t emitted_ = 0;
 };
 
@@ -491,19 +561,22 @@ namespace detail {
 std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, FileFormat format,
                                                    const ReadOptions& options) {
   if (format == FileFormat::ply) {
-    // The header says how many vertices there are; a header that does not parse is left to the reader to
-    // report.
-    std::uint64_t vertices = 0;
+    // The header says how many vertices there are and what each holds; a header that does not parse is left
+    // to the reader to report.
+    std::uint64_t vertices = 0, bytes = kVertexBytes;
     try {
       ByteReader reader(path, 1 << 16);
       const PlyHeader header = parse_ply_header(reader);
       for (const PlyElement& element : header.elements) {
-        if (element.name == "vertex") vertices = element.count;
+        if (element.name == "vertex") {
+          vertices = element.count;
+          bytes = ply_vertex_bytes(path, element);
+        }
       }
     } catch (const Error&) {
       return nullptr;
     }
-    if (vertices * kVertexBytes <= options.memory_budget) return nullptr;
+    if (vertices <= options.memory_budget / bytes) return nullptr;
     return std::make_unique<DereferencedStream>(path, format, options);
   }
   if (format == FileFormat::obj) {

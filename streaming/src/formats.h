@@ -1,6 +1,7 @@
 // The per-format readers and writers behind io.h. Each reader is a TriangleStream; read_mesh() drains it.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -15,6 +16,11 @@ std::unique_ptr<TriangleStream> open_ply_stream(const std::string& path, const R
 std::unique_ptr<TriangleStream> open_obj_stream(const std::string& path, const ReadOptions& options);
 std::unique_ptr<TriangleStream> open_stl_stream(const std::string& path, const ReadOptions& options);
 std::unique_ptr<TriangleStream> open_drc_stream(const std::string& path, const ReadOptions& options);
+
+struct PlyElement;
+// The bytes a PLY reader keeps per vertex of `element`: the position and the attributes it reads (the
+// memory budget counts them). Throws Error where the element has no position.
+std::uint64_t ply_vertex_bytes(const std::string& path, const PlyElement& element);
 
 // The reader for `format` with its vertex array bounded by options.memory_budget (external_dereference.cpp),
 // or nullptr when the file's vertices certainly fit (the caller opens the plain reader).

@@ -161,17 +161,21 @@ IndexedMesh drain(TriangleStream& source) {
     mesh.origin = stream->vertices().origin;  // a soup's corners are relative to it too
     std::unordered_map<PositionKey, Index, PositionKeyHash> index_of;
     while (stream->next(batch)) {
-      for (const auto& corners : batch.corners) {
+      for (std::size_t i = 0; i < batch.corners.size(); ++i) {
         Triangle t;
         for (int k = 0; k < 3; ++k) {
-          const Vec3f& p = corners[k];
+          const Vec3f& p = batch.corners[i][k];
           const PositionKey key{float_key(p.x()), float_key(p.y()), float_key(p.z())};
           auto [it, inserted] = index_of.try_emplace(key, static_cast<Index>(mesh.positions.size()));
           if (inserted) {
             if (mesh.positions.size() >= std::numeric_limits<Index>::max()) {
               throw Error(path, {}, "more than 2^32-1 distinct vertices");
             }
+            // A welded vertex takes the attributes of its first corner.
             mesh.positions.push_back(p);
+            if (!batch.corner_normals.empty()) mesh.normals.push_back(batch.corner_normals[i][k]);
+            if (!batch.corner_colors.empty()) mesh.colors.push_back(batch.corner_colors[i][k]);
+            if (!batch.corner_uvs.empty()) mesh.uvs.push_back(batch.corner_uvs[i][k]);
           }
           t[k] = it->second;
         }

@@ -1,6 +1,7 @@
 #include "ocsimp/streaming/mesh_stream.h"
 
 #include <algorithm>
+#include <array>
 
 namespace ocsimp {
 namespace {
@@ -14,8 +15,8 @@ class MeshStream final : public TriangleStream {
     mesh.triangles.clear();
     bounds_ = mesh.bounds();
     if (as_soup_) {
-      soup_positions_ = std::move(mesh.positions);
-      vertices_.origin = mesh.origin;
+      soup_ = std::move(mesh);  // its attributes ride on the corners
+      vertices_.origin = soup_.origin;
     } else {
       vertices_ = std::move(mesh);
     }
@@ -27,7 +28,10 @@ class MeshStream final : public TriangleStream {
     for (; cursor_ < end; ++cursor_) {
       const Triangle& t = triangles_[cursor_];
       if (as_soup_) {
-        batch.corners.push_back({soup_positions_[t[0]], soup_positions_[t[1]], soup_positions_[t[2]]});
+        batch.corners.push_back(corners_of(soup_.positions, t));
+        if (soup_.has_normals()) batch.corner_normals.push_back(corners_of(soup_.normals, t));
+        if (soup_.has_colors()) batch.corner_colors.push_back(corners_of(soup_.colors, t));
+        if (soup_.has_uvs()) batch.corner_uvs.push_back(corners_of(soup_.uvs, t));
       } else {
         batch.triangles.push_back(t);
       }
@@ -42,8 +46,13 @@ class MeshStream final : public TriangleStream {
   const std::string& path() const override { return path_; }
 
  private:
+  template <class T>
+  static std::array<T, 3> corners_of(const std::vector<T>& values, const Triangle& t) {
+    return {values[t[0]], values[t[1]], values[t[2]]};
+  }
+
   IndexedMesh vertices_;
-  std::vector<Vec3f> soup_positions_;
+  IndexedMesh soup_;  // as a soup: the vertices, without triangles
   std::vector<Triangle> triangles_;
   bool as_soup_;
   std::size_t capacity_;

@@ -371,7 +371,9 @@ class ObjStream final : public TriangleStream {
 
   void flush_sink() {
     if (sink_buffer_.empty()) return;
-    vertex_sink_(sink_buffer_.data(), sink_buffer_.size());
+    VertexChunk chunk;
+    chunk.positions = sink_buffer_;
+    vertex_sink_(chunk);
     sink_buffer_.clear();
   }
 
@@ -431,7 +433,7 @@ class ObjStream final : public TriangleStream {
   std::size_t capacity_;
   ProgressFn progress_;
   // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
-  std::function<void(const Vec3f*, std::size_t)> vertex_sink_;
+  std::function<void(const VertexChunk&)> vertex_sink_;
   bool sink_saw_colors_ = false;  // out of core: a vertex line had colors, which the sink does not take
   OriginSample origin_sample_{{}, /*settled=*/false};  // OBJ text is more precise than floats
   std::vector<Vec3f> sink_buffer_;

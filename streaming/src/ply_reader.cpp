@@ -294,10 +294,6 @@ class PlyStream final : public TriangleStream {
   std::uint64_t bytes_read() const override;
   std::uint64_t bytes_total() const override { return bytes_total_; }
   const std::string& path() const override { return reader_.path(); }
-  std::string attributes_left_out() const override {
-    if (!vertex_sink_) return {};
-    return attribute_list(vertex_plan_.normals, vertex_plan_.colors, vertex_plan_.uvs);
-  }
 
  private:
   // -- positions for errors
@@ -368,7 +364,7 @@ class PlyStream final : public TriangleStream {
 
   detail::ByteReader reader_;
   ProgressFn progress_;
-  std::function<void(const Vec3f*, std::size_t)> vertex_sink_;  // out of core: vertices go there, not kept
+  std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
   // the start: the origin stays zero.
   OriginSample origin_sample_;
@@ -1074,7 +1070,7 @@ void PlyStream::flush_vertices() {
   // Until the sample is complete the vertices stay here (at most kOriginSample and a buffer's worth), so the
   // origin comes from the same vertices in core and out of core.
   if (!vertex_sink_ || vertices_.positions.empty() || !origin_sample_.settled) return;
-  vertex_sink_(vertices_.positions.data(), vertices_.positions.size());
+  vertex_sink_({vertices_.positions, vertices_.normals, vertices_.colors, vertices_.uvs});
   vertices_.positions.clear();
   vertices_.normals.clear();
   vertices_.colors.clear();
@@ -1361,6 +1357,11 @@ bool PlyStream::read_fast_faces() {
 
 std::unique_ptr<TriangleStream> open_ply_stream(const std::string& path, const ReadOptions& options) {
   return std::make_unique<PlyStream>(path, options);
+}
+
+std::uint64_t ply_vertex_bytes(const std::string& path, const PlyElement& element) {
+  const VertexPlan plan = plan_vertices(path, element);
+  return vertex_bytes(plan.normals, plan.colors, plan.uvs);
 }
 
 }  // namespace ocsimp::detail

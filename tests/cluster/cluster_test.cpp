@@ -967,6 +967,42 @@ TEST(Cluster, AttributesAreAveragedPerCell) {
   }
 }
 
+// A soup's corners may carry attributes (a PLY dereferenced out of core): they are averaged over the cell's
+// corners, as its positions are. With uv = xy and red = 200 x, a mean-placed vertex has both at its own
+// position; the octree, which merges cells, too.
+TEST(Cluster, ASoupsCornerAttributesAreAveragedWithItsCorners) {
+  IndexedMesh mesh = test::grid_square(40);
+  const std::size_t n = mesh.vertex_count();
+  mesh.normals.assign(n, Vec3f(0, 0.6f, 0.8f));
+  mesh.colors.resize(n);
+  mesh.uvs.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3f& p = mesh.positions[i];
+    mesh.uvs[i] = p.head<2>();
+    mesh.colors[i] = {static_cast<std::uint8_t>(std::lround(200 * p.x())), 7, 99, 255};
+  }
+  ClusterOptions octree = octree_options(30);
+  octree.representative = Representative::mean;
+  for (const ClusterOptions& options : {grid_options(7, Representative::mean), octree}) {
+    SCOPED_TRACE(options.octree ? "octree" : "grid");
+    const QuadricMesh soup = run(mesh, options, nullptr, true);
+    const QuadricMesh indexed = run(mesh, options);
+    ASSERT_EQ(soup.mesh.normals.size(), soup.mesh.vertex_count());
+    ASSERT_EQ(soup.mesh.colors.size(), soup.mesh.vertex_count());
+    ASSERT_EQ(soup.mesh.uvs.size(), soup.mesh.vertex_count());
+    EXPECT_EQ(soup.mesh.vertex_count(), indexed.mesh.vertex_count());
+    for (std::size_t v = 0; v < soup.mesh.vertex_count(); ++v) {
+      const Vec3f& p = soup.mesh.positions[v];
+      EXPECT_NEAR((soup.mesh.normals[v] - Vec3f(0, 0.6f, 0.8f)).norm(), 0.0, 1e-5) << v;  // float sums
+      EXPECT_NEAR((soup.mesh.uvs[v] - p.head<2>()).norm(), 0.0, 1e-5) << v;
+      // Rounded input reds (half a unit) and a rounded mean (another half).
+      EXPECT_NEAR(soup.mesh.colors[v][0], 200 * p.x(), 1.0) << v;
+      EXPECT_EQ(soup.mesh.colors[v][1], 7);
+      EXPECT_EQ(soup.mesh.colors[v][2], 99);
+    }
+  }
+}
+
 TEST(Cluster, UnreferencedVerticesChangeNothing) {
   // Points no triangle uses (a scan's outliers, left in the vertex list) are not surface: they used to be
   // averaged into their cells' means and attributes, moving mean representatives off the plane.

@@ -237,8 +237,8 @@ void check_report_destination(const std::string& report, const std::vector<std::
 void warn_attributes_left_out(const std::string& input, const std::string& left_out) {
   if (left_out.empty()) return;
   std::fprintf(stderr,
-               "ocsimp: warning: %s: its %s are not in the output: past the memory limit the vertices are "
-               "read from disk as positions only\n",
+               "ocsimp: warning: %s: its %s are not in the output: past the memory limit an OBJ's vertices "
+               "are read from disk as positions only (a PLY's keep their attributes)\n",
                input.c_str(), left_out.c_str());
 }
 

@@ -96,7 +96,10 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
   stage.out_of_core = dereferenced_out_of_core(*stream);
   stage.attributes_left_out = stream->attributes_left_out();
-  const double vertex_bytes = static_cast<double>(stream->vertices().positions.size()) * 12.0;
+  // The vertex array held through the clustering pass: positions and whatever attributes the reader kept.
+  const IndexedMesh& held = stream->vertices();
+  const double vertex_bytes = static_cast<double>(
+      held.positions.size() * ocsimp::vertex_bytes(held.has_normals(), held.has_colors(), held.has_uvs()));
   // OBJ does not say its face count up front; its size does, roughly (at least ~20 bytes a face line).
   std::uint64_t faces_hint = stream->triangles_hint();
   if (faces_hint == 0) faces_hint = stream->bytes_total() / 40;

@@ -33,6 +33,12 @@ struct IndexedMesh {
   Box3 bounds() const;
 };
 
+// Bytes a vertex takes in memory: its position and each attribute it has (the memory budgets count them).
+constexpr std::size_t vertex_bytes(bool normals, bool colors, bool uvs) {
+  return sizeof(Vec3f) + (normals ? sizeof(Vec3f) : 0) + (colors ? sizeof(Color) : 0) +
+         (uvs ? sizeof(Vec2f) : 0);
+}
+
 // Past this distance from zero on some axis, float spacing exceeds 2^-14 (6e-5): a reader of coordinates held
 // more precisely than floats (double or 32-bit integer PLY properties, OBJ text) takes such a mesh relative
 // to a point of its own.

@@ -5,15 +5,20 @@
 // budget (the stream is then an ordinary indexed stream of positions), otherwise they go to a temporary file.
 // In the second case the faces are drained once to a file of indices, and the vertex ids are cut into
 // partitions that each fit the budget: for each partition its vertices are loaded and the index file is
-// scanned, writing the position of every corner that falls in it, in face order, to that partition's region
-// of a corner file. next() then reads the index file once more and takes each corner's position from the
-// next unread record of its partition's region, so it delivers the faces in file order as triangle soups.
+// scanned, writing the record of every corner that falls in it, in face order, to that partition's region
+// of a corner file. next() then reads the index file once more and takes each corner's record from the
+// next unread one of its partition's region, so it delivers the faces in file order as triangle soups.
+//
+// A record is a vertex's position and the attributes its reader delivers: a PLY's normals, colors and
+// texture coordinates (R = 12 bytes, + 12, + 4, + 8), which reach the soup's corners. An OBJ indexes its
+// attributes per corner, separately from its positions; its records are positions only, and the stream
+// names what it leaves out (TriangleStream::attributes_left_out).
 //
 // Memory: the budget (one partition, or the read buffers of every partition) plus a few buffers; at most 64
 // partitions, as each costs a scan of the index file, so below a 64th of the vertex array the budget is
-// exceeded rather than the time growing without bound. Disk under
-// TMPDIR: 12 bytes a vertex + 12 bytes a triangle (indices) + 36 bytes a triangle (corners). The temporary
-// files are unlinked as soon as they are created, so nothing is left behind however the process ends.
+// exceeded rather than the time growing without bound. Disk under TMPDIR: R bytes a vertex + up to 12 bytes
+// a triangle (indices, coded) + 3R bytes a triangle (corners). The temporary files are unlinked as soon as
+// they are created, so nothing is left behind however the process ends.
 #pragma once
 
 #include <cstdint>

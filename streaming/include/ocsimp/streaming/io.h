@@ -7,6 +7,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "ocsimp/core/mesh.h"
@@ -24,17 +25,29 @@ FileFormat detect_format(const std::string& path);
 // From the extension alone (for writers): .ply .obj .stl .drc, case-insensitive. Throws Error otherwise.
 FileFormat format_from_extension(const std::string& path);
 
+// Consecutive vertices handed to ReadOptions::vertex_sink: their positions, and each attribute the reader
+// delivers for them (the others empty).
+struct VertexChunk {
+  std::span<const Vec3f> positions;
+  std::span<const Vec3f> normals;
+  std::span<const Color> colors;
+  std::span<const Vec2f> uvs;
+};
+
 struct ReadOptions {
   std::size_t batch_capacity = TriangleBatch::default_capacity;
   ProgressFn progress;  // bytes of input read ("read" phase)
-  // Bound in bytes on the vertex array (12 bytes a vertex) an indexed reader (PLY, OBJ) may hold; 0: none.
-  // Past it, open_triangle_stream dereferences the faces out of core (external_dereference.h): the stream
-  // then delivers triangle soups (corner positions; vertex attributes are dropped) in the file's face order.
+  // Bound in bytes on the vertex array an indexed reader (PLY, OBJ) may hold, 0 for none: 12 bytes a
+  // position, and for a PLY 12 more for normals, 4 for colors and 8 for texture coordinates where it has
+  // them. Past it, open_triangle_stream dereferences the faces out of core (external_dereference.h): the
+  // stream then delivers triangle soups in the file's face order, their corners carrying a PLY's per-vertex
+  // normals, colors and texture coordinates (an OBJ's, which it indexes per corner, are dropped and named by
+  // TriangleStream::attributes_left_out).
   std::uint64_t memory_budget = 0;
-  // For the out-of-core path: when set, an indexed reader hands its positions to this sink in file order, a
-  // chunk at a time, and keeps no vertex array nor attributes; next() still yields indices into the file's
-  // vertices and checks them against the file's vertex count. Other readers ignore it.
-  std::function<void(const Vec3f* positions, std::size_t count)> vertex_sink;
+  // For the out-of-core path: when set, an indexed reader hands its vertices to this sink in file order, a
+  // chunk at a time, and keeps no vertex array; next() still yields indices into the file's vertices and
+  // checks them against the file's vertex count. Other readers ignore it.
+  std::function<void(const VertexChunk& chunk)> vertex_sink;
   // Whether read_mesh refuses a file without faces (a PLY's empty face element says so at its header line).
   // `info` and `convert` read them: ocsimp writes one when every triangle of a clustering collapses.
   bool faces_required = true;

@@ -20,11 +20,20 @@ struct TriangleBatch {
 
   std::vector<Triangle> triangles;
   std::vector<std::array<Vec3f, 3>> corners;
+  // A soup's corner attributes, one entry per entry of `corners`, where the stream has them (faces
+  // dereferenced out of core from a PLY with per-vertex normals, colors or texture coordinates); otherwise
+  // empty. A stream fills the same ones in every batch.
+  std::vector<std::array<Vec3f, 3>> corner_normals;
+  std::vector<std::array<Color, 3>> corner_colors;
+  std::vector<std::array<Vec2f, 3>> corner_uvs;
 
   std::size_t size() const { return triangles.size() + corners.size(); }
   void clear() {
     triangles.clear();
     corners.clear();
+    corner_normals.clear();
+    corner_colors.clear();
+    corner_uvs.clear();
   }
 };
 
@@ -63,7 +72,7 @@ class TriangleStream {
   virtual const std::string& path() const = 0;
 
   // Vertex attributes the file has that this stream does not deliver, as a list ("normals and colors"): an
-  // out-of-core stream delivers corner positions only. Empty when nothing is left out.
+  // OBJ dereferenced out of core delivers corner positions only. Empty when nothing is left out.
   virtual std::string attributes_left_out() const { return {}; }
 };
 
