@@ -597,6 +597,30 @@ TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) 
   EXPECT_TRUE(read_mesh(out).normals.empty());
 }
 
+// A memory limit below what clustering to the target needs cannot be kept: the target comes first (reached,
+// out of core here), and the run says how much it may take. A limit that fits says nothing.
+TEST(Cli, SimplifySaysWhenTheMemoryLimitIsTooSmallForTheTarget) {
+  test::TempDir dir;
+  const std::string mesh = dir / "scan.ply", out = dir / "out.ply";
+  ASSERT_EQ(run("gen -q --triangles 200000 --seed 3 -o " + mesh, dir).exit_code, 0);
+  for (const std::string command : {"simplify", "lod"}) {
+    SCOPED_TRACE(command);
+    const CommandResult tight =
+        run(command + " -q " + mesh + " -o " + out + " --faces 20000 --memory-limit 2M", dir);
+    ASSERT_EQ(tight.exit_code, 0) << tight.err;
+    EXPECT_NE(tight.err.find("scan.ply: clustering to the target may take up to"), std::string::npos)
+        << tight.err;
+    EXPECT_NE(tight.err.find("over the memory limit of 2.0 MiB"), std::string::npos) << tight.err;
+    const std::size_t faces = read_mesh(out).face_count();
+    EXPECT_GE(faces, 19999u);
+    EXPECT_LE(faces, 20000u);
+    const CommandResult roomy =
+        run(command + " -q " + mesh + " -o " + out + " --faces 20000 --memory-limit 1G", dir);
+    ASSERT_EQ(roomy.exit_code, 0) << roomy.err;
+    EXPECT_EQ(roomy.err.find("memory limit"), std::string::npos) << roomy.err;
+  }
+}
+
 TEST(Cli, SimplifyAndLodWeldATriangleSoupOnRequest) {
   // A sphere whose every triangle has its own three vertices, as some exporters write it. Without --weld its
   // faces share no edge and are decimated as separate triangles (90 % of them deleted); welded, it is one

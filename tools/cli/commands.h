@@ -72,6 +72,8 @@ void write_json_report(const std::string& path, const nlohmann::json& report);
 // The warning that the input's vertex attributes (`left_out`, as SimplifyResult lists them) are not in the
 // output; nothing when the list is empty.
 void warn_attributes_left_out(const std::string& input, const std::string& left_out);
+// Warns when the memory limit was too small for the target (SimplifyResult::memory_needed).
+void warn_memory_needed(const std::string& input, std::uint64_t needed, std::uint64_t limit);
 
 double seconds_since(std::chrono::steady_clock::time_point start);
 

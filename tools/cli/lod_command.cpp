@@ -153,6 +153,7 @@ void add_lod_command(CLI::App& app) {
       write_json_report(flags->report, report);
     }
     warn_attributes_left_out(flags->input, result.attributes_left_out);
+    warn_memory_needed(flags->input, result.memory_needed, result.memory_limit);
     for (const LodLevel& level : result.levels) {
       if (!level.decimate.target_reached && !level.decimate.reason.empty()) {
         std::fprintf(stderr, "ocsimp: warning: level %llu: %s\n",

@@ -123,6 +123,7 @@ void add_simplify_command(CLI::App& app) {
       write_json_report(flags->report, report);
     }
     warn_attributes_left_out(flags->input, result.attributes_left_out);
+    warn_memory_needed(flags->input, result.memory_needed, result.memory_limit);
     if (!result.decimate.target_reached && !result.decimate.reason.empty()) {
       std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", result.decimate.reason.c_str());
     }

@@ -17,15 +17,29 @@ namespace {
 // input triangle on the 10 M scan (bench/decimate_vs_meshopt.sh), plus the 12-byte face and ~6-byte vertex
 // arrays it was read into, rounded up. Used only to choose the path.
 constexpr double kInCoreBytesPerFace = 160.0;
-// Peak bytes per occupied fine cell of the octree clustering, cells and merge state together: 3.8 GiB over
-// the vertex array for 12 M fine cells on the 10^9-triangle scan (bench/simplify_large.sh), rounded up.
-constexpr double kClusterBytesPerCell = 340.0;
-// The same for a triangle soup (an out-of-core dereferenced input, STL): its pass keys the cells by their
-// coordinates, keeps their first-seen order and sorts them at the end, 540-750 bytes a fine cell with the
-// merge (`ocsimp cluster` of a 10 M soup, octree to 0.2-1 M faces); and since it cannot count its cells
-// before the pass, it holds up to twice the targeted number before halving its grid.
-constexpr double kSoupClusterBytesPerCell = 2 * 760.0;
+// Peak bytes per occupied fine cell of the octree clustering of an indexed input, cells and merge state
+// together; the pass releases the vertex array as it goes, so by the peak it is mostly gone. Measured with
+// `simplify --two-stage` on generated scans: 4 M triangles at 262 k and 906 k fine cells, 170 and 572 MiB
+// (654 bytes a cell over 7 MiB); 20 M triangles at 275 k and 1.04 M cells, 198 and 635 MiB. (The 340 taken
+// before, from a billion-triangle run, let --memory-limit 400M peak at 631 MiB on the 20 M scan.)
+constexpr double kClusterBytesPerCell = 660.0;
+// The fine grid is a power of two, of the level whose occupied cells come nearest the plan: up to about twice
+// the planned number (gen 4 M and 20 M at 140 k and 147 k planned: 262 k and 276 k cells).
+constexpr double kLevelMargin = 2.0;
+// Peak bytes per occupied fine cell of a triangle soup's clustering (an out-of-core dereferenced input, STL):
+// its pass keys the cells by their coordinates, keeps their first-seen order and sorts them at the end.
+// Measured on the 20 M scan out of core, 276 k cells: 285 MiB, and 300-326 MiB with normals and colors on the
+// corners. It cannot count its cells before the pass, so it halves its grid whenever they outgrow twice the
+// plan, which leaves up to twice the planned number, as the indexed pass's level choice does.
+constexpr double kSoupClusterBytesPerCell = 1200.0;
+// What the out-of-core stream holds through the soup's pass: a read buffer for each of at most 64 partitions.
+constexpr double kDereferenceBuffers = 65.0 * (1 << 20);
 constexpr double kMaxIntermediate = 8.0;
+// The clustering stage stops at the largest face count it reaches not above its own target, often a few short
+// of it: an intermediate a quarter over the final target leaves the decimator the slack to meet it exactly
+// (a 40 k-face scan to 2,000 faces under a 256 KiB limit, with the intermediate at the target, ended at
+// 1,999).
+constexpr double kMinMultiple = 1.25;
 // However small the target, an intermediate the decimator takes in a fraction of a second (about 0.2 s for
 // 2^18 faces) is not worth making coarser: clustering to a few hundred faces loses what decimation keeps.
 // Measured with --two-stage through 8x the target: fandisk to 129 faces, RMS 2.2x pure decimation's (its
@@ -41,11 +55,21 @@ constexpr double kMinIntermediate = 1 << 18;
 constexpr double kMaxFineCells = 300'000;
 constexpr double kMinFinePerVertex = 1.2;
 
-// Fine cells the octree accumulates for an intermediate of `faces` faces (about faces / 2 vertices).
-double fine_cells_for(double faces, double fine_per_vertex) {
+// Fine cells the octree accumulates for an intermediate of `faces` faces (about faces / 2 vertices): the full
+// count per vertex, capped at `cap` cells (kMaxFineCells, or fewer where the memory budget has less room)
+// but never below the minimum per vertex.
+double fine_cells_for(double faces, double fine_per_vertex, double cap = kMaxFineCells,
+                      double min_per_vertex = kMinFinePerVertex) {
   const double vertices = faces / 2;
-  const double low = std::min(kMinFinePerVertex, fine_per_vertex) * vertices;
-  return std::max(low, std::min(kMaxFineCells, fine_per_vertex * vertices));
+  const double low = std::min(min_per_vertex, fine_per_vertex) * vertices;
+  return std::max(low, std::min(cap, fine_per_vertex * vertices));
+}
+
+// A soup's pass halves its grid while it holds more than twice the planned cells, which can leave half of
+// them: it plans twice the minimum, so that every intermediate vertex still has a cell (a 20 M scan out of
+// core, planned at the minimum, came out of the clustering with 142 k faces for a target of 200 k).
+double min_fine_per_vertex(bool soup) {
+  return soup ? 2 * kMinFinePerVertex : kMinFinePerVertex;
 }
 
 using Clock = std::chrono::steady_clock;
@@ -60,6 +84,7 @@ struct FirstStage {
   bool clustered = false;
   bool out_of_core = false;
   std::string attributes_left_out;
+  std::uint64_t memory_needed = 0;  // SimplifyResult::memory_needed
   std::uint64_t input_faces = 0;
   std::uint64_t intermediate_faces = 0;
   std::uint64_t cluster_target_faces = 0;  // what the clustering stage was asked for
@@ -76,6 +101,8 @@ struct FirstStage {
 FirstStage first_stage(const std::string& input_path, const SimplifyOptions& options) {
   FirstStage stage;
   stage.memory_limit = effective_memory_limit(options.memory_limit);
+  // The process before it reads anything (code, libraries, thread pools): the plan's estimate adds to it.
+  const auto process_bytes = static_cast<double>(peak_rss_bytes());
   const double budget = static_cast<double>(stage.memory_limit);
 
   auto start = Clock::now();
@@ -87,7 +114,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const double fine_per_vertex = options.cluster.fine_cells_per_target;
   const double cluster_reserve =
       options.target_faces > 0
-          ? kClusterBytesPerCell *
+          ? kLevelMargin * kClusterBytesPerCell *
                 fine_cells_for(2.0 * static_cast<double>(options.target_faces), fine_per_vertex)
           : budget / 2;
   // At least a byte: 0 would mean no bound at all (a --memory-limit of 1 byte read the input in core).
@@ -118,11 +145,16 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // The largest intermediate whose fine cells fit beside the vertex array: fine_cells_for is the full
   // per-vertex count below the cap, flat at the cap, then the minimum per-vertex count, so its inverse is
   // room / full below the cap and room / minimum from it on (vertices; twice that in faces).
-  const double cell_room = std::max(0.0, budget - vertex_bytes) /
-                           (stream->indexed() ? kClusterBytesPerCell : kSoupClusterBytesPerCell);
+  const bool soup = !stream->indexed();
+  // Bytes per planned fine cell, and what the stream holds beside the cells.
+  const double cell_bytes = kLevelMargin * (soup ? kSoupClusterBytesPerCell : kClusterBytesPerCell);
+  const double held_bytes =
+      soup ? std::min(static_cast<double>(read.memory_budget), kDereferenceBuffers) : vertex_bytes;
+  const double min_per_vertex = min_fine_per_vertex(soup);
+  const double cell_room = std::max(0.0, budget - held_bytes) / cell_bytes;
   const double cluster_room =
       2.0 * cell_room /
-      (cell_room < kMaxFineCells ? fine_per_vertex : std::min(kMinFinePerVertex, fine_per_vertex));
+      (cell_room < kMaxFineCells ? fine_per_vertex : std::min(min_per_vertex, fine_per_vertex));
   const double decimate_room = budget / kInCoreBytesPerFace;
   const double room = std::min(cluster_room, decimate_room);
   std::uint64_t intermediate_faces;
@@ -130,7 +162,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     const double multiple =
         options.intermediate > 0
             ? options.intermediate
-            : std::clamp(std::floor(room / static_cast<double>(target)), 1.0, kMaxIntermediate);
+            : std::clamp(std::floor(room / static_cast<double>(target)), kMinMultiple, kMaxIntermediate);
     double faces = multiple * static_cast<double>(target);
     if (options.intermediate == 0) faces = std::max(faces, std::min(kMinIntermediate, room));
     // Never more than the input (a multiple of 1e30 asks for all of it): the cast of a larger double
@@ -169,9 +201,17 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
   stage.cluster_target_faces = cluster_options.target_faces;
   stage.intermediate_given = options.intermediate > 0;
+  // Fewer fine cells a vertex where the budget has no room for the full count, down to the minimum.
+  const double fine_cells = fine_cells_for(static_cast<double>(cluster_options.target_faces), fine_per_vertex,
+                                           std::min(kMaxFineCells, cell_room), min_per_vertex);
   cluster_options.fine_cells_per_target =
-      fine_cells_for(static_cast<double>(cluster_options.target_faces), fine_per_vertex) /
-      (static_cast<double>(cluster_options.target_faces) / 2);
+      fine_cells / (static_cast<double>(cluster_options.target_faces) / 2);
+  // Even the fewest fine cells the intermediate can have may not fit: the run goes on (the target comes
+  // first), and says what it expects to need. An indexed pass releases the vertex array as its cells grow.
+  const double cells_needed = fine_cells * cell_bytes;
+  const double expected_peak =
+      process_bytes + (soup ? held_bytes + cells_needed : std::max(vertex_bytes, cells_needed));
+  if (expected_peak > budget) stage.memory_needed = static_cast<std::uint64_t>(expected_peak);
   // The capped fine grid above is the point, so the pass refines it only where it could not even give the
   // decimator its final target (far-apart parts, a far stray point): then the intermediate came out empty.
   // With an error bound alone, a quarter of the intermediate's vertices: a surface spanning its box gets
@@ -237,6 +277,7 @@ void report_first_stage(FirstStage& stage, Result& result) {
   result.cluster_error = intermediate_error(stage);
   result.out_of_core = stage.out_of_core;
   result.attributes_left_out = std::move(stage.attributes_left_out);
+  result.memory_needed = stage.memory_needed;
   result.input_faces = stage.input_faces;
   result.intermediate_faces = stage.intermediate_faces;
   result.phases = std::move(stage.phases);

@@ -82,9 +82,12 @@ struct SimplifyResult {
   double max_error() const { return std::max(cluster_error, decimate.max_error); }
   std::uint64_t memory_limit = 0;  // the budget in force
   bool out_of_core = false;        // the input's vertices were dereferenced on disk (io.h, memory_budget)
-  // The input's vertex attributes that the out-of-core reading left out, as a list ("normals and colors"); empty
-  // when the result carries all the input has.
+  // The input's vertex attributes that the out-of-core reading left out, as a list ("normals and colors");
+  // empty when the result carries all the input has.
   std::string attributes_left_out;
+  // The most memory the clustering stage's plan may take, in bytes, when that is over memory_limit (even the
+  // coarsest plan that reaches the target did not fit); 0 when the plan fit.
+  std::uint64_t memory_needed = 0;
 };
 
 // Runs the pipeline on a file (any format ocsimp reads). Throws Error on bad input or impossible options.
@@ -131,6 +134,7 @@ struct LodResult {
   std::uint64_t memory_limit = 0;
   bool out_of_core = false;
   std::string attributes_left_out;  // as in SimplifyResult
+  std::uint64_t memory_needed = 0;  // as in SimplifyResult
 };
 
 // One read of the input (in core or clustered, as simplify() decides for the largest level), then each level
