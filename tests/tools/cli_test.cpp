@@ -300,6 +300,10 @@ TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
   EXPECT_EQ(c.exit_code, 0) << c.err;
   EXPECT_EQ(c.err.find("span"), std::string::npos) << c.err;
   EXPECT_GT(read_mesh(result).face_count(), 0u);
+  // Without --grid the default one is meant, and the warning says so rather than naming a flag never given.
+  const CommandResult d = run("cluster -q " + stretched + " -o " + result, dir);
+  EXPECT_EQ(d.exit_code, 0) << d.err;
+  EXPECT_NE(d.err.find("of the 256 cells of the default --grid 256"), std::string::npos) << d.err;
 }
 
 TEST(Cli, FailedConvertLeavesNothingBehind) {

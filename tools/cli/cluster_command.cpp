@@ -61,7 +61,7 @@ void add_cluster_command(CLI::App& app) {
   cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");
-  cmd->callback([flags] {
+  cmd->callback([flags, grid] {
     const auto start = std::chrono::steady_clock::now();
     check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
@@ -143,9 +143,10 @@ void add_cluster_command(CLI::App& app) {
     if (options.grid > 0 && !(options.cell_size > 0) && !options.octree && options.target_faces == 0 &&
         2 * std::uint64_t{stats.spanned_cells} < options.grid) {
       std::fprintf(stderr,
-                   "ocsimp: warning: the faces span only %u of the %u cells of --grid %u: vertices no face "
+                   "ocsimp: warning: the faces span only %u of the %u cells of %s %u: vertices no face "
                    "uses stretch the bounding box; --cell-size sets the cells' size directly\n",
-                   stats.spanned_cells, options.grid, options.grid);
+                   stats.spanned_cells, options.grid, grid->count() > 0 ? "--grid" : "the default --grid",
+                   options.grid);
     }
     if (!stats.target_met) {
       std::fprintf(stderr,
