@@ -423,9 +423,7 @@ class DereferencedStream final : public TriangleStream {
     if (emitted_ == triangles_) return false;
     if (!face_reader_) {
       face_reader_.emplace(*faces_file_, face_bytes_, kBufferBytes);
-      // Every partition's region is read at once: their buffers share the budget.
-      const std::size_t buffer = static_cast<std::size_t>(
-          std::clamp<std::uint64_t>(budget_ / (partitions_ + 1), kMinBufferBytes, kBufferBytes));
+      const std::size_t buffer = buffer_bytes();
       corner_readers_.reserve(partitions_);
       for (std::size_t p = 0; p < partitions_; ++p)
         corner_readers_.emplace_back(*corners_file_, region_offset_[p], corner_counts_[p], record_, buffer);
@@ -454,6 +452,12 @@ class DereferencedStream final : public TriangleStream {
   const std::string& path() const override { return path_; }
 
   bool out_of_core() const { return !inner_; }
+  std::size_t partitions() const { return partitions_; }
+  // Every partition's region is read at once: their buffers share the budget.
+  std::size_t buffer_bytes() const {
+    return static_cast<std::size_t>(
+        std::clamp<std::uint64_t>(budget_ / (partitions_ + 1), kMinBufferBytes, kBufferBytes));
+  }
 
  private:
   // The faces, once, to the index file; counts the corners of each partition.
@@ -554,6 +558,12 @@ std::unique_ptr<TriangleStream> open_dereferenced_stream(const std::string& path
 bool dereferenced_out_of_core(const TriangleStream& stream) {
   const auto* dereferenced = dynamic_cast<const DereferencedStream*>(&stream);
   return dereferenced != nullptr && dereferenced->out_of_core();
+}
+
+std::uint64_t dereference_buffer_bytes(const TriangleStream& stream) {
+  if (!dereferenced_out_of_core(stream)) return 0;
+  const auto& dereferenced = dynamic_cast<const DereferencedStream&>(stream);
+  return dereferenced.partitions() * dereferenced.buffer_bytes() + kBufferBytes;  // and the faces' reader
 }
 
 namespace detail {

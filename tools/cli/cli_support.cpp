@@ -245,8 +245,8 @@ void warn_attributes_left_out(const std::string& input, const std::string& left_
 void warn_memory_needed(const std::string& input, std::uint64_t needed, std::uint64_t limit) {
   if (needed == 0) return;
   std::fprintf(stderr,
-               "ocsimp: warning: %s: clustering to the target may take up to %s, over the memory limit of %s "
-               "(a larger --memory-limit or a smaller target keeps within it)\n",
+               "ocsimp: warning: %s: clustering to the target is expected to take about %s, over the memory "
+               "limit of %s (a larger --memory-limit or a smaller target keeps within it)\n",
                input.c_str(), format_bytes(needed).c_str(), format_bytes(limit).c_str());
 }
 

@@ -28,12 +28,11 @@ constexpr double kClusterBytesPerCell = 660.0;
 constexpr double kLevelMargin = 2.0;
 // Peak bytes per occupied fine cell of a triangle soup's clustering (an out-of-core dereferenced input, STL):
 // its pass keys the cells by their coordinates, keeps their first-seen order and sorts them at the end.
-// Measured on the 20 M scan out of core, 276 k cells: 285 MiB, and 300-326 MiB with normals and colors on the
-// corners. It cannot count its cells before the pass, so it halves its grid whenever they outgrow twice the
-// plan, which leaves up to twice the planned number, as the indexed pass's level choice does.
-constexpr double kSoupClusterBytesPerCell = 1200.0;
-// What the out-of-core stream holds through the soup's pass: a read buffer for each of at most 64 partitions.
-constexpr double kDereferenceBuffers = 65.0 * (1 << 20);
+// Measured on the 20 M scan out of core at 276 k cells: 413 MiB, and 469 MiB with normals and colors on the
+// corners (1.5 and 1.7 KiB a cell). It cannot count its cells before the pass, so it halves its grid whenever
+// they outgrow twice the plan, which leaves up to twice the planned number, as the indexed pass's level
+// choice does.
+constexpr double kSoupClusterBytesPerCell = 1800.0;
 constexpr double kMaxIntermediate = 8.0;
 // The clustering stage stops at the largest face count it reaches not above its own target, often a few short
 // of it: an intermediate a quarter over the final target leaves the decimator the slack to meet it exactly
@@ -101,7 +100,7 @@ struct FirstStage {
 FirstStage first_stage(const std::string& input_path, const SimplifyOptions& options) {
   FirstStage stage;
   stage.memory_limit = effective_memory_limit(options.memory_limit);
-  // The process before it reads anything (code, libraries, thread pools): the plan's estimate adds to it.
+  // The process before it reads anything (code, libraries, thread pools): the estimate below adds to it.
   const auto process_bytes = static_cast<double>(peak_rss_bytes());
   const double budget = static_cast<double>(stage.memory_limit);
 
@@ -148,8 +147,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const bool soup = !stream->indexed();
   // Bytes per planned fine cell, and what the stream holds beside the cells.
   const double cell_bytes = kLevelMargin * (soup ? kSoupClusterBytesPerCell : kClusterBytesPerCell);
-  const double held_bytes =
-      soup ? std::min(static_cast<double>(read.memory_budget), kDereferenceBuffers) : vertex_bytes;
+  const double held_bytes = soup ? static_cast<double>(dereference_buffer_bytes(*stream)) : vertex_bytes;
   const double min_per_vertex = min_fine_per_vertex(soup);
   const double cell_room = std::max(0.0, budget - held_bytes) / cell_bytes;
   const double cluster_room =
@@ -207,8 +205,10 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.fine_cells_per_target =
       fine_cells / (static_cast<double>(cluster_options.target_faces) / 2);
   // Even the fewest fine cells the intermediate can have may not fit: the run goes on (the target comes
-  // first), and says what it expects to need. An indexed pass releases the vertex array as its cells grow.
-  const double cells_needed = fine_cells * cell_bytes;
+  // first), and says what it expects to take, with the planned number of cells rather than the margin's
+  // (a warning at every run whose grid merely could come out larger would be noise). An indexed pass
+  // releases the vertex array as its cells grow.
+  const double cells_needed = fine_cells * cell_bytes / kLevelMargin;
   const double expected_peak =
       process_bytes + (soup ? held_bytes + cells_needed : std::max(vertex_bytes, cells_needed));
   if (expected_peak > budget) stage.memory_needed = static_cast<std::uint64_t>(expected_peak);

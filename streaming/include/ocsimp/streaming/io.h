@@ -57,6 +57,9 @@ std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
                                                      const ReadOptions& options = {});
 // Whether `stream` dereferences its faces on disk (opened past ReadOptions::memory_budget).
 bool dereferenced_out_of_core(const TriangleStream& stream);
+// The read buffers such a stream holds while it delivers its triangles (one per partition of the vertex
+// ids), in bytes; 0 for any other stream.
+std::uint64_t dereference_buffer_bytes(const TriangleStream& stream);
 
 // The whole mesh in memory, built by draining the stream. Corners of a triangle soup (STL) that share a
 // position exactly are welded into one vertex.

@@ -85,8 +85,8 @@ struct SimplifyResult {
   // The input's vertex attributes that the out-of-core reading left out, as a list ("normals and colors");
   // empty when the result carries all the input has.
   std::string attributes_left_out;
-  // The most memory the clustering stage's plan may take, in bytes, when that is over memory_limit (even the
-  // coarsest plan that reaches the target did not fit); 0 when the plan fit.
+  // The memory the clustering stage's plan is expected to take, in bytes, when that is over memory_limit
+  // (even the coarsest plan that reaches the target did not fit); 0 when the plan fit.
   std::uint64_t memory_needed = 0;
 };
 
