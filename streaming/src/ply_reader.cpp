@@ -1102,7 +1102,11 @@ void PlyStream::check_end_of_data() {
 // ---- Faces ------------------------------------------------------------------------------------------------
 
 bool PlyStream::next(TriangleBatch& batch) {
+  // A soup's fields, should the caller reuse a batch; the triangles are kept for the resize below.
   batch.corners.clear();
+  batch.corner_normals.clear();
+  batch.corner_colors.clear();
+  batch.corner_uvs.clear();
   if (faces_done_) {
     batch.triangles.clear();
     return false;
