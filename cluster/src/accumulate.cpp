@@ -854,23 +854,95 @@ void contribute(const Facet& f, Chunk& chunk, bool boundary) {
   }
 }
 
+// Vertex attributes summed per cell (or per slot of a chunk), for those the input has: an indexed pass sums
+// its vertices', a soup's pass its corners' (TriangleBatch::corner_normals and the others).
+struct AttributeSums {
+  bool normals = false, colors = false, uvs = false;
+  std::vector<Vec3f> normal_sum;
+  std::vector<std::array<std::uint64_t, 4>> color_sum;
+  std::vector<Vec2d> uv_sum;
+
+  // Which attributes a soup's batch with triangles carries; throws when it carries one for only some corners.
+  static AttributeSums carried_by(const TriangleBatch& batch, const std::string& path) {
+    const std::size_t n = batch.corners.size();
+    auto carried = [&](std::size_t size) {
+      if (size != 0 && size != n)
+        throw Error(path, {}, "a triangle soup stream delivered corner attributes for only some corners");
+      return size == n;
+    };
+    AttributeSums a;
+    a.normals = carried(batch.corner_normals.size());
+    a.colors = carried(batch.corner_colors.size());
+    a.uvs = carried(batch.corner_uvs.size());
+    return a;
+  }
+  bool same_kinds(const AttributeSums& other) const {
+    return normals == other.normals && colors == other.colors && uvs == other.uvs;
+  }
+  void same_as(const AttributeSums& other) {
+    normals = other.normals, colors = other.colors, uvs = other.uvs;
+  }
+  void push_back() {
+    if (normals) normal_sum.emplace_back(Vec3f::Zero());
+    if (colors) color_sum.push_back({0, 0, 0, 0});
+    if (uvs) uv_sum.emplace_back(Vec2d::Zero());
+  }
+  void clear() {
+    normal_sum.clear();
+    color_sum.clear();
+    uv_sum.clear();
+  }
+  void add_vertex(std::uint32_t s, const IndexedMesh& vertices, std::size_t v) {
+    if (normals) normal_sum[s] += vertices.normals[v];
+    if (colors) {
+      for (int c = 0; c < 4; ++c) color_sum[s][c] += vertices.colors[v][c];
+    }
+    if (uvs) uv_sum[s] += vertices.uvs[v].cast<double>();
+  }
+  void add_corner(std::uint32_t s, const TriangleBatch& batch, std::size_t t, int k) {
+    if (normals) normal_sum[s] += batch.corner_normals[t][k];
+    if (colors) {
+      for (int c = 0; c < 4; ++c) color_sum[s][c] += batch.corner_colors[t][k][c];
+    }
+    if (uvs) uv_sum[s] += batch.corner_uvs[t][k].cast<double>();
+  }
+  void add(std::uint32_t i, const AttributeSums& from, std::uint32_t j) {
+    if (normals) normal_sum[i] += from.normal_sum[j];
+    if (colors) {
+      for (int c = 0; c < 4; ++c) color_sum[i][c] += from.color_sum[j][c];
+    }
+    if (uvs) uv_sum[i] += from.uv_sum[j];
+  }
+  // Adds entry j to cell i of `cells`, whose attribute arrays hold these kinds.
+  void add_to(FineCells& cells, std::uint32_t i, std::uint32_t j) const {
+    if (normals) cells.normal_sum[i] += normal_sum[j];
+    if (colors) {
+      for (int c = 0; c < 4; ++c) cells.color_sum[i][c] += color_sum[j][c];
+    }
+    if (uvs) cells.uv_sum[i] += uv_sum[j];
+  }
+  // Sizes the attribute arrays of `cells` for `count` cells of these kinds, at zero.
+  void size_cells(FineCells& cells, std::size_t count) const {
+    if (normals) cells.normal_sum.assign(count, Vec3f::Zero());
+    if (colors) cells.color_sum.assign(count, {0, 0, 0, 0});
+    if (uvs) cells.uv_sum.assign(count, Vec2d::Zero());
+  }
+};
+
 // One chunk of vertices: partial sums of what is averaged per cell.
 struct PointChunk {
   ChunkTable<std::uint32_t> table;
   std::vector<std::uint32_t> points;
-  std::vector<Vec3f> point_sum, normal_sum;
-  std::vector<std::array<std::uint64_t, 4>> color_sum;
-  std::vector<Vec2d> uv_sum;
+  std::vector<Vec3f> point_sum;
+  AttributeSums attributes;
 
-  std::uint32_t slot(std::uint32_t cell, bool normals, bool colors, bool uvs) {
+  std::uint32_t slot(std::uint32_t cell) {
     bool inserted;
     const std::uint32_t s = table.slot(cell, inserted);
     if (inserted) {
       points.push_back(0);
       point_sum.emplace_back(Vec3f::Zero());
-      if (normals) normal_sum.emplace_back(Vec3f::Zero());
-      if (colors) color_sum.push_back({0, 0, 0, 0});
-      if (uvs) uv_sum.emplace_back(Vec2d::Zero());
+      attributes.push_back();
     }
     return s;
   }
@@ -878,9 +950,7 @@ struct PointChunk {
     table.clear();
     points.clear();
     point_sum.clear();
-    normal_sum.clear();
-    color_sum.clear();
-    uv_sum.clear();
+    attributes.clear();
   }
   void sort_by_cell() { table.sort_by_cell(); }
 };
@@ -1189,9 +1259,9 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   const bool normals = vertices.normals.size() == vertex_count;
   const bool colors = vertices.colors.size() == vertex_count;
   const bool uvs = vertices.uvs.size() == vertex_count;
-  if (normals) cells.normal_sum.assign(count, Vec3f::Zero());
-  if (colors) cells.color_sum.assign(count, {0, 0, 0, 0});
-  if (uvs) cells.uv_sum.assign(count, Vec2d::Zero());
+  AttributeSums kinds;
+  kinds.normals = normals, kinds.colors = colors, kinds.uvs = uvs;
+  kinds.size_cells(cells, count);
   constexpr std::size_t kBlock = 1 << 20;
   static_assert(kBlock % kChunkVertices == 0, "blocks hold whole chunks");
   std::vector<PointChunk> point_chunks(kBlock / kChunkVertices);
@@ -1201,6 +1271,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t j) {
       PointChunk& chunk = point_chunks[j];
       chunk.clear();
+      chunk.attributes.same_as(kinds);
       const std::size_t first = start + j * kChunkVertices, last = std::min(end, first + kChunkVertices);
       if (!normals && !colors && !uvs) {
         // Positions only, the common case, in a loop of its own: a run of vertices in one cell adds to a
@@ -1221,7 +1292,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
           if (cell != current) {
             flush();
             current = cell;
-            s = chunk.slot(cell, false, false, false);
+            s = chunk.slot(cell);
             count_in_run = 0;
             const Vec3f& sum = chunk.point_sum[s];
             sx = sum.x(), sy = sum.y(), sz = sum.z();
@@ -1243,14 +1314,10 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         unpack(packed[v], cell, q);
         if (!(q & kReferenced)) continue;
         q &= ~kReferenced;
-        const std::uint32_t s = chunk.slot(cell, normals, colors, uvs);
+        const std::uint32_t s = chunk.slot(cell);
         ++chunk.points[s];
         chunk.point_sum[s] += dequantize(q).cast<float>();
-        if (normals) chunk.normal_sum[s] += vertices.normals[v];
-        if (colors) {
-          for (int c = 0; c < 4; ++c) chunk.color_sum[s][c] += vertices.colors[v][c];
-        }
-        if (uvs) chunk.uv_sum[s] += vertices.uvs[v].cast<double>();
+        chunk.attributes.add_vertex(s, vertices, v);
       }
       chunk.sort_by_cell();
     });
@@ -1261,11 +1328,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
                      sums.points[cell] += chunk.points[s];
                      sums.point_sum[cell] += chunk.point_sum[s];
                    }
-                   if (normals) cells.normal_sum[cell] += chunk.normal_sum[s];
-                   if (colors) {
-                     for (int c = 0; c < 4; ++c) cells.color_sum[cell][c] += chunk.color_sum[s][c];
-                   }
-                   if (uvs) cells.uv_sum[cell] += chunk.uv_sum[s];
+                   chunk.attributes.add_to(cells, cell, s);
                  });
     // These vertices are done with: hand their pages back now rather than when the whole array goes, so that
     // the sums above never sit in memory beside all of it.
@@ -1294,60 +1357,6 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
 // What a soup pass says of a NaN or infinite corner, wherever it meets one first.
 constexpr const char* kNonFiniteCorner = "a triangle has a non-finite corner";
 
-// A soup's corner attributes (those its stream carries: TriangleBatch::corner_normals and the others)
-// summed per cell, as an indexed pass sums its vertices' attributes.
-struct SoupAttributes {
-  bool normals = false, colors = false, uvs = false;
-  std::vector<Vec3f> normal_sum;
-  std::vector<std::array<std::uint64_t, 4>> color_sum;
-  std::vector<Vec2d> uv_sum;
-
-  // Which attributes a batch with triangles carries; throws when it carries one for only some corners.
-  static SoupAttributes carried_by(const TriangleBatch& batch, const std::string& path) {
-    const std::size_t n = batch.corners.size();
-    auto carried = [&](std::size_t size) {
-      if (size != 0 && size != n)
-        throw Error(path, {}, "a triangle soup stream delivered corner attributes for only some corners");
-      return size == n;
-    };
-    SoupAttributes a;
-    a.normals = carried(batch.corner_normals.size());
-    a.colors = carried(batch.corner_colors.size());
-    a.uvs = carried(batch.corner_uvs.size());
-    return a;
-  }
-  bool same_kinds(const SoupAttributes& other) const {
-    return normals == other.normals && colors == other.colors && uvs == other.uvs;
-  }
-  void same_as(const SoupAttributes& other) {
-    normals = other.normals, colors = other.colors, uvs = other.uvs;
-  }
-  void push_back() {
-    if (normals) normal_sum.emplace_back(Vec3f::Zero());
-    if (colors) color_sum.push_back({0, 0, 0, 0});
-    if (uvs) uv_sum.emplace_back(Vec2d::Zero());
-  }
-  void clear() {
-    normal_sum.clear();
-    color_sum.clear();
-    uv_sum.clear();
-  }
-  void add_corner(std::uint32_t s, const TriangleBatch& batch, std::size_t t, int k) {
-    if (normals) normal_sum[s] += batch.corner_normals[t][k];
-    if (colors) {
-      for (int c = 0; c < 4; ++c) color_sum[s][c] += batch.corner_colors[t][k][c];
-    }
-    if (uvs) uv_sum[s] += batch.corner_uvs[t][k].cast<double>();
-  }
-  void add(std::uint32_t i, const SoupAttributes& from, std::uint32_t j) {
-    if (normals) normal_sum[i] += from.normal_sum[j];
-    if (colors) {
-      for (int c = 0; c < 4; ++c) color_sum[i][c] += from.color_sum[j][c];
-    }
-    if (uvs) uv_sum[i] += from.uv_sum[j];
-  }
-};
-
 // One chunk of a triangle soup: partial sums of the cells it touches, by cell key, and its surviving
 // triangles.
 struct SoupChunk {
@@ -1355,7 +1364,7 @@ struct SoupChunk {
   std::vector<CellRecord> records;
   std::vector<std::uint32_t> points;
   std::vector<Vec3f> point_sum;
-  SoupAttributes attributes;
+  AttributeSums attributes;
   std::vector<CellTriple<CellKey>> survivors;
 
   std::uint32_t slot(CellKey key) {
@@ -1388,7 +1397,7 @@ struct SoupCells {
   CellMap map;
   std::vector<CellKey> keys;
   CellStore<std::int32_t> store;
-  SoupAttributes attributes;
+  AttributeSums attributes;
 
   std::uint32_t number(CellKey key) {
     bool inserted;
@@ -1404,7 +1413,7 @@ struct SoupCells {
   // Adds partial sums to cell i, its attributes' from entry j of `from`; `touched`: some triangle touched the
   // part.
   void add(std::uint32_t i, const CellRecord& part, bool touched, std::uint32_t points,
-           const Vec3f& point_sum, const SoupAttributes& from, std::uint32_t j) {
+           const Vec3f& point_sum, const AttributeSums& from, std::uint32_t j) {
     store.add(i, part);
     if (touched) store.touch(i);
     // A cell's means stay those of the points counted, should its count ever saturate.
@@ -1538,7 +1547,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
       throw Error(stream.path(), {}, "a triangle soup stream delivered indexed triangles");
     }
     if (!batch.corners.empty()) {
-      const SoupAttributes carried = SoupAttributes::carried_by(batch, stream.path());
+      const AttributeSums carried = AttributeSums::carried_by(batch, stream.path());
       if (!attributes_known) {
         seen.attributes.same_as(carried);
         attributes_known = true;
@@ -1611,10 +1620,8 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   if (options.boundary) cells.border.resize(count);
   sorted.points.resize(count);
   sorted.point_sum.resize(count);
-  const SoupAttributes& attributes = seen.attributes;
-  if (attributes.normals) cells.normal_sum.resize(count);
-  if (attributes.colors) cells.color_sum.resize(count);
-  if (attributes.uvs) cells.uv_sum.resize(count);
+  const AttributeSums& attributes = seen.attributes;
+  attributes.size_cells(cells, count);
   CellMap numbering(count);
   for (std::size_t i = 0; i < count; ++i) {
     const std::uint32_t from = entries[i].second;
@@ -1626,9 +1633,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     }
     sorted.points[i] = store.points[from];
     sorted.point_sum[i] = store.point_sum[from];
-    if (attributes.normals) cells.normal_sum[i] = attributes.normal_sum[from];
-    if (attributes.colors) cells.color_sum[i] = attributes.color_sum[from];
-    if (attributes.uvs) cells.uv_sum[i] = attributes.uv_sum[from];
+    attributes.add_to(cells, static_cast<std::uint32_t>(i), from);
     bool inserted;
     numbering.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);
   }
