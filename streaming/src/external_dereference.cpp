@@ -404,15 +404,14 @@ class DereferencedStream final : public TriangleStream {
       return;
     }
     left_out_ = inner_->attributes_left_out();
-    layout_ = spool_.layout();
-    record_ = layout_.bytes();
     faces_file_.emplace();
     corners_file_.emplace();
     drain_faces();
     inner_.reset();
+    const std::size_t record = spool_.layout().bytes();
     corners_file_->reserve(
-        3 * triangles_ * record_,
-        (record_ == sizeof(Vec3f) ? "the positions of " : "the positions and attributes of ") +
+        3 * triangles_ * record,
+        (record == sizeof(Vec3f) ? "the positions of " : "the positions and attributes of ") +
             std::to_string(3 * triangles_) + " corners");
     resolve_partitions();
   }
@@ -421,17 +420,19 @@ class DereferencedStream final : public TriangleStream {
     if (inner_) return inner_->next(batch);
     batch.clear();
     if (emitted_ == triangles_) return false;
+    const RecordLayout& layout = spool_.layout();
     if (!face_reader_) {
       face_reader_.emplace(*faces_file_, face_bytes_, kBufferBytes);
       const std::size_t buffer = buffer_bytes();
       corner_readers_.reserve(partitions_);
       for (std::size_t p = 0; p < partitions_; ++p)
-        corner_readers_.emplace_back(*corners_file_, region_offset_[p], corner_counts_[p], record_, buffer);
+        corner_readers_.emplace_back(*corners_file_, region_offset_[p], corner_counts_[p], layout.bytes(),
+                                     buffer);
     }
     while (batch.corners.size() < capacity_ && emitted_ < triangles_) {
       const Triangle t = face_reader_->next();
-      layout_.grow(batch);
-      for (int k = 0; k < 3; ++k) layout_.unpack(corner_readers_[t[k] / part_size_].next(), batch, k);
+      layout.grow(batch);
+      for (int k = 0; k < 3; ++k) layout.unpack(corner_readers_[t[k] / part_size_].next(), batch, k);
       ++emitted_;
     }
     return true;
@@ -462,8 +463,9 @@ class DereferencedStream final : public TriangleStream {
  private:
   // The faces, once, to the index file; counts the corners of each partition.
   void drain_faces() {
-    part_size_ = std::max<std::uint64_t>(
-        {budget_ / record_, (vertex_count_ + kMaxPartitions - 1) / kMaxPartitions, std::uint64_t{1}});
+    part_size_ =
+        std::max<std::uint64_t>({budget_ / spool_.layout().bytes(),
+                                 (vertex_count_ + kMaxPartitions - 1) / kMaxPartitions, std::uint64_t{1}});
     partitions_ = static_cast<std::size_t>((vertex_count_ + part_size_ - 1) / part_size_);
     corner_counts_.assign(partitions_, 0);
     FaceWriter writer(*faces_file_, kBufferBytes);
@@ -489,22 +491,23 @@ class DereferencedStream final : public TriangleStream {
 
   // Each partition's vertices in memory, one scan of the index file, its corners' positions to its region.
   void resolve_partitions() {
+    const std::size_t record = spool_.layout().bytes();
     region_offset_.assign(partitions_, 0);
     for (std::size_t p = 1; p < partitions_; ++p)
-      region_offset_[p] = region_offset_[p - 1] + corner_counts_[p - 1] * record_;
+      region_offset_[p] = region_offset_[p - 1] + corner_counts_[p - 1] * record;
     const TempFile& vertex_file = spool_.file();
     std::vector<std::uint8_t> part;
     for (std::size_t p = 0; p < partitions_; ++p) {
       const std::uint64_t first = p * part_size_;
       const std::uint64_t size = std::min(part_size_, vertex_count_ - first);
-      part.resize(static_cast<std::size_t>(size * record_));
-      vertex_file.read_at(first * record_, part.data(), part.size());
+      part.resize(static_cast<std::size_t>(size * record));
+      vertex_file.read_at(first * record, part.data(), part.size());
       FaceReader faces(*faces_file_, face_bytes_, kBufferBytes);
-      RecordWriter corners(*corners_file_, region_offset_[p], record_, kBufferBytes);
+      RecordWriter corners(*corners_file_, region_offset_[p], record, kBufferBytes);
       for (std::uint64_t f = 0; f < triangles_; ++f) {
         for (Index v : faces.next()) {
           const std::uint64_t local = v - first;  // wraps past the end for ids below `first`
-          if (local < size) std::memcpy(corners.push(), part.data() + local * record_, record_);
+          if (local < size) std::memcpy(corners.push(), part.data() + local * record, record);
         }
       }
       corners.flush();
@@ -521,8 +524,6 @@ class DereferencedStream final : public TriangleStream {
   // constructing, the reader in sink mode).
   std::unique_ptr<TriangleStream> inner_;
   std::string left_out_;  // what the sink-mode reader left out (TriangleStream::attributes_left_out)
-  RecordLayout layout_;   // what a spooled vertex and a corner carry
-  std::size_t record_ = sizeof(Vec3f);
   IndexedMesh vertices_;
   Box3 bounds_;
   std::uint64_t vertex_count_ = 0;
