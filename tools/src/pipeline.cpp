@@ -145,11 +145,11 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // per-vertex count below the cap, flat at the cap, then the minimum per-vertex count, so its inverse is
   // room / full below the cap and room / minimum from it on (vertices; twice that in faces).
   const bool soup = !stream->indexed();
-  // Bytes per planned fine cell, and what the stream holds beside the cells.
-  const double cell_bytes = kLevelMargin * (soup ? kSoupClusterBytesPerCell : kClusterBytesPerCell);
+  // Bytes per occupied fine cell, and what the stream holds beside the cells.
+  const double cell_bytes = soup ? kSoupClusterBytesPerCell : kClusterBytesPerCell;
   const double held_bytes = soup ? static_cast<double>(dereference_buffer_bytes(*stream)) : vertex_bytes;
   const double min_per_vertex = min_fine_per_vertex(soup);
-  const double cell_room = std::max(0.0, budget - held_bytes) / cell_bytes;
+  const double cell_room = std::max(0.0, budget - held_bytes) / (kLevelMargin * cell_bytes);
   const double cluster_room =
       2.0 * cell_room /
       (cell_room < kMaxFineCells ? fine_per_vertex : std::min(min_per_vertex, fine_per_vertex));
@@ -208,7 +208,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // first), and says what it expects to take, with the planned number of cells rather than the margin's
   // (a warning at every run whose grid merely could come out larger would be noise). An indexed pass
   // releases the vertex array as its cells grow.
-  const double cells_needed = fine_cells * cell_bytes / kLevelMargin;
+  const double cells_needed = fine_cells * cell_bytes;
   const double expected_peak =
       process_bytes + (soup ? held_bytes + cells_needed : std::max(vertex_bytes, cells_needed));
   if (expected_peak > budget) stage.memory_needed = static_cast<std::uint64_t>(expected_peak);
