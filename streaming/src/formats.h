@@ -22,6 +22,10 @@ struct PlyElement;
 // memory budget counts them). Throws Error where the element has no position.
 std::uint64_t ply_vertex_bytes(const std::string& path, const PlyElement& element);
 
+// The triangles a PLY's header announces (its face element's count, bounded by what the file could hold),
+// without reading its data; 0 for triangle strips. Throws Error where the header does not parse.
+std::uint64_t ply_triangles_hint(const std::string& path);
+
 // The reader for `format` with its vertex array bounded by options.memory_budget (external_dereference.cpp),
 // or nullptr when the file's vertices certainly fit (the caller opens the plain reader).
 std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, FileFormat format,

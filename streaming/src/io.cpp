@@ -122,6 +122,23 @@ FileFormat detect_format(const std::string& path) {
   throw Error(path, FilePosition::byte(0), "unrecognized file format (not PLY, OBJ, STL or Draco)");
 }
 
+std::uint64_t triangles_hint(const std::string& path) {
+  try {
+    switch (detect_format(path)) {
+      case FileFormat::ply:
+        return detail::ply_triangles_hint(path);
+      case FileFormat::obj:
+        return detail::ByteReader(path, 1 << 12).file_size() / 40;
+      case FileFormat::stl:
+      case FileFormat::drc:
+        return 0;
+    }
+  } catch (const Error&) {
+    // The reader says what is wrong when the file is opened.
+  }
+  return 0;
+}
+
 std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path, const ReadOptions& options) {
   const FileFormat format = detect_format(path);
   if (options.memory_budget > 0 && !options.vertex_sink) {

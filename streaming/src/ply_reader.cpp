@@ -283,6 +283,15 @@ VertexPlan plan_vertices(const std::string& path, const PlyElement& element) {
 // ---- The stream
 // ---------------------------------------------------------------------------------------------
 
+// A face element's count is only a hint: bound it by what the data could hold at the smallest record, so
+// no one plans for the 10^15 faces a header may claim.
+std::uint64_t bounded_face_count(const PlyElement& faces, const PlyProperty& index, bool ascii,
+                                 std::uint64_t data_bytes) {
+  const std::uint64_t min_face_bytes =
+      ascii ? 8 : ply_type_size(index.count_type) + 3 * ply_type_size(index.type);
+  return std::min(faces.count, data_bytes / min_face_bytes);
+}
+
 class PlyStream final : public TriangleStream {
  public:
   PlyStream(const std::string& path, const ReadOptions& options);
@@ -508,12 +517,9 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
                 (ascii_ ? ply_type_is_integer(index_property.type)
                         : index_property.type == PlyType::int32 || index_property.type == PlyType::uint32);
 
-  // The count is only a hint, but bound it by what the file could hold so no one is misled by 10^15.
   const std::uint64_t data_bytes = reader_.file_size() - header_.data_offset;
-  const std::uint64_t min_face_bytes =
-      ascii_ ? 8 : ply_type_size(index_property.count_type) + 3 * ply_type_size(index_property.type);
   triangles_hint_ = strips_ ? strip_triangles_bound(face_element, data_bytes)
-                            : std::min(face_element.count, data_bytes / min_face_bytes);
+                            : bounded_face_count(face_element, index_property, ascii_, data_bytes);
   bytes_total_ = reader_.file_size();
 
   std::size_t element = 0;
@@ -1361,6 +1367,20 @@ bool PlyStream::read_fast_faces() {
 
 std::unique_ptr<TriangleStream> open_ply_stream(const std::string& path, const ReadOptions& options) {
   return std::make_unique<PlyStream>(path, options);
+}
+
+std::uint64_t ply_triangles_hint(const std::string& path) {
+  ByteReader reader(path, 1 << 16);
+  const PlyHeader header = parse_ply_header(reader);
+  for (const PlyElement& element : header.elements) {
+    if (element.name != "face") continue;
+    auto index = element.find("vertex_indices");
+    if (!index) index = element.find("vertex_index");
+    if (!index || !element.properties[*index].is_list) return 0;
+    return bounded_face_count(element, element.properties[*index], header.encoding == PlyEncoding::ascii,
+                              reader.file_size() - header.data_offset);
+  }
+  return 0;
 }
 
 std::uint64_t ply_vertex_bytes(const std::string& path, const PlyElement& element) {

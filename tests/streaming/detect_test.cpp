@@ -111,6 +111,38 @@ TEST(Detect, UnrecognizedAndEmptyFilesAreErrors) {
   EXPECT_THROW(detect_format(dir / "missing.obj"), Error);
 }
 
+// What the pipeline plans for before it opens a file (opening a PLY reads all its vertices): the header's
+// face count, bounded by what the data could hold; an OBJ's size over 40 bytes a face; 0 where nothing is
+// announced or the file does not parse.
+TEST(Detect, TrianglesHintComesFromTheHeaderAlone) {
+  TempDir dir;
+  const std::string ply = dir / "m.ply";
+  test::write_file_bytes(ply, kAsciiPly);
+  EXPECT_EQ(triangles_hint(ply), 1u);
+  IndexedMesh quad;
+  quad.positions = {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(1, 1, 0), Vec3f(0, 1, 0)};
+  quad.triangles = {{0, 1, 2}, {0, 2, 3}};
+  write_mesh(dir / "quad.ply", quad);
+  EXPECT_EQ(triangles_hint(dir / "quad.ply"), 2u);
+  // A header claiming 10^15 faces over 26 bytes of data plans for what those bytes could hold at the
+  // shortest face line ("3 0 1 2\n").
+  std::string claim = kAsciiPly;
+  claim.replace(claim.find("element face 1"), 14, "element face 1000000000000000");
+  test::write_file_bytes(dir / "claim.ply", claim);
+  EXPECT_EQ(triangles_hint(dir / "claim.ply"), 26u / 8);
+  std::string obj;
+  for (int i = 0; i < 100; ++i) obj += kObj;
+  test::write_file_bytes(dir / "m.obj", obj);
+  EXPECT_EQ(triangles_hint(dir / "m.obj"), obj.size() / 40);
+  test::write_file_bytes(dir / "m.stl", kAsciiStl);
+  EXPECT_EQ(triangles_hint(dir / "m.stl"), 0u);
+  std::string broken = kAsciiPly;
+  broken.replace(broken.find("format ascii"), 12, "format bogus");
+  test::write_file_bytes(dir / "broken.ply", broken);
+  EXPECT_EQ(triangles_hint(dir / "broken.ply"), 0u);
+  EXPECT_EQ(triangles_hint(dir / "missing.ply"), 0u);
+}
+
 TEST(Detect, OutputFormatFromExtension) {
   EXPECT_EQ(format_from_extension("a/b.OBJ"), FileFormat::obj);
   EXPECT_EQ(format_from_extension("x.Stl"), FileFormat::stl);

@@ -483,13 +483,13 @@ TEST(Cli, LodRefusesAPatternWithoutFacesForSeveralLevels) {
 TEST(Cli, SimplifyReportHasTheDocumentedFields) {
   test::TempDir dir;
   const std::string scan = dir / "scan.ply";
-  ASSERT_EQ(run("gen -q --holes 1 --triangles 40000 -o " + scan, dir).exit_code, 0);
-  const CommandResult r = run("simplify " + scan + " -o " + (dir / "out.obj") + " --faces 2000 --two-stage " +
+  ASSERT_EQ(run("gen -q --holes 1 --triangles 100000 -o " + scan, dir).exit_code, 0);
+  const CommandResult r = run("simplify " + scan + " -o " + (dir / "out.obj") + " --faces 120 --two-stage " +
                                   "--memory-limit 256K --report " + (dir / "report.json"),
                               dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out, "");
-  EXPECT_EQ(read_mesh(dir / "out.obj").face_count(), 2000u);
+  EXPECT_EQ(read_mesh(dir / "out.obj").face_count(), 120u);
   const nlohmann::json report = nlohmann::json::parse(file_bytes(dir / "report.json"));
   const auto fields = {"command",
                        "input",
@@ -510,7 +510,7 @@ TEST(Cli, SimplifyReportHasTheDocumentedFields) {
                        "reason",
                        "phases"};
   expect_keys(report, fields);
-  EXPECT_EQ(report["output_faces"].get<std::uint64_t>(), 2000u);
+  EXPECT_EQ(report["output_faces"].get<std::uint64_t>(), 120u);
   EXPECT_TRUE(report["clustered"].get<bool>());
   EXPECT_TRUE(report["out_of_core"].get<bool>());
   EXPECT_EQ(report["memory_limit_bytes"].get<std::uint64_t>(), 256u << 10);
@@ -560,10 +560,10 @@ AttributeFit attribute_fit(const IndexedMesh& mesh) {
 TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) {
   test::TempDir dir;
   const std::string mesh = dir / "coloured.ply", obj = dir / "coloured.obj";
-  const CommandResult g = run("gen -q --triangles 5000 --seed 2 --normals --colors -o " + mesh, dir);
+  const CommandResult g = run("gen -q --triangles 40000 --seed 2 --normals --colors -o " + mesh, dir);
   ASSERT_EQ(g.exit_code, 0) << g.err;
   const std::string out = dir / "out.ply";
-  const CommandResult plain = run("simplify -q " + mesh + " -o " + out + " --faces 500", dir);
+  const CommandResult plain = run("simplify -q " + mesh + " -o " + out + " --faces 100", dir);
   EXPECT_EQ(plain.exit_code, 0) << plain.err;
   const IndexedMesh in_core = read_mesh(out);
   ASSERT_EQ(in_core.colors.size(), in_core.positions.size());
@@ -572,7 +572,7 @@ TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) 
 
   const std::string report = dir / "report.json";
   const CommandResult limited =
-      run("simplify -q " + mesh + " -o " + out + " --faces 500 --memory-limit 10000 --report " + report, dir);
+      run("simplify -q " + mesh + " -o " + out + " --faces 100 --memory-limit 10000 --report " + report, dir);
   EXPECT_EQ(limited.exit_code, 0) << limited.err;
   EXPECT_EQ(limited.err.find("not in the output"), std::string::npos) << limited.err;
   EXPECT_TRUE(nlohmann::json::parse(file_bytes(report))["out_of_core"].get<bool>());
@@ -585,15 +585,15 @@ TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) 
   EXPECT_GT(fit.normals_agreeing, 0.98) << reference.normals_agreeing;
 
   const CommandResult levels =
-      run("lod -q " + mesh + " -o " + (dir / "l_{faces}.ply") + " --faces 500,100 --memory-limit 10000", dir);
+      run("lod -q " + mesh + " -o " + (dir / "l_{faces}.ply") + " --faces 100,50 --memory-limit 10000", dir);
   EXPECT_EQ(levels.exit_code, 0) << levels.err;
   EXPECT_EQ(levels.err.find("not in the output"), std::string::npos) << levels.err;
-  const IndexedMesh level = read_mesh(dir / "l_100.ply");
+  const IndexedMesh level = read_mesh(dir / "l_50.ply");
   EXPECT_EQ(level.colors.size(), level.positions.size());
 
   ASSERT_EQ(run("convert -q " + mesh + " " + obj, dir).exit_code, 0);
   const CommandResult from_obj =
-      run("simplify -q " + obj + " -o " + out + " --faces 500 --memory-limit 10000", dir);
+      run("simplify -q " + obj + " -o " + out + " --faces 100 --memory-limit 10000", dir);
   EXPECT_EQ(from_obj.exit_code, 0) << from_obj.err;
   EXPECT_NE(from_obj.err.find("coloured.obj: its normals and colors are not in the output"),
             std::string::npos)

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "ocsimp/cluster/cluster.h"
 #include "ocsimp/core/error.h"
@@ -219,18 +221,19 @@ TEST(Pipeline, TwoStageDecimatesAnInputNoLargerThanItsIntermediateDirectly) {
 }
 
 TEST(Pipeline, OutOfCoreGivesTheInMemorySoupResult) {
-  // A budget far below the vertex array (30k vertices, 360 kB) forces external dereferencing; the cluster
-  // stage must then see exactly the triangles it sees when the same mesh is streamed from memory as a soup.
+  // A budget far below the vertex array (30k vertices, 360 kB) and a target far below the input force
+  // external dereferencing; the cluster stage must then see exactly the triangles it sees when the same mesh
+  // is streamed from memory as a soup.
   test::TempDir dir;
   const std::string path = write_scan(dir, 60'000, 2);
   SimplifyOptions options;
-  options.target_faces = 3'000;
+  options.target_faces = 100;
   options.intermediate = 4;
   options.memory_limit = 256 << 10;
   const SimplifyResult result = simplify(path, options);
   EXPECT_TRUE(result.out_of_core);
   EXPECT_TRUE(result.clustered);
-  EXPECT_EQ(result.mesh.face_count(), 3'000u);
+  EXPECT_EQ(result.mesh.face_count(), 100u);
   // The smallest budget of all is no exception (one byte left the reader unbounded).
   SimplifyOptions tiny = options;
   tiny.memory_limit = 1;
@@ -271,17 +274,40 @@ TEST(Pipeline, OutOfCoreReachesTheTargetDespiteAFarUnusedPoint) {
   const std::string path = dir / "stray.ply";
   write_mesh(path, stray);
   SimplifyOptions options;
-  options.target_faces = 3'000;
+  options.target_faces = 100;
   options.memory_limit = 256 << 10;
   CompareOptions compare;
   compare.samples = 100'000;
   const SimplifyResult with_point = simplify(path, options);
   EXPECT_TRUE(with_point.out_of_core);
-  EXPECT_GE(with_point.mesh.face_count(), 2'900u);
-  EXPECT_LE(with_point.mesh.face_count(), 3'000u);
+  EXPECT_GE(with_point.mesh.face_count(), 97u);
+  EXPECT_LE(with_point.mesh.face_count(), 100u);
   const double rms = measure_distance(original, with_point.mesh, compare).rms;
   const double rms_without = measure_distance(original, simplify(scan, options).mesh, compare).rms;
   EXPECT_LT(rms, 1.5 * rms_without);
+}
+
+TEST(Pipeline, KeepsTheVerticesInCoreWhereClusteringThemAsASoupWouldTakeMore) {
+  // 30 k vertices (360 kB) under a 256 kB limit. Dereferenced on disk, the faces are clustered as a soup,
+  // whose cells take several times the bytes of the indexed pass's: for 3,000 faces (a ratio of 5 %, read
+  // from the header) that is more than the vertex array itself, so the vertices stay in core and only the
+  // far smaller target goes out of core (it used to at any target whose clustering took half the limit).
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);
+  SimplifyOptions options;
+  options.memory_limit = 256 << 10;
+  for (const auto& [faces, ratio, out_of_core] :
+       {std::tuple{3'000, 0.0, false}, {0, 0.05, false}, {100, 0.0, true}, {0, 100.0 / 60'000, true}}) {
+    SCOPED_TRACE(std::to_string(faces) + " faces, ratio " + std::to_string(ratio));
+    options.target_faces = static_cast<std::uint64_t>(faces);
+    options.target_ratio = ratio;
+    const SimplifyResult result = simplify(path, options);
+    EXPECT_EQ(result.out_of_core, out_of_core);
+    EXPECT_TRUE(result.clustered);
+    const double by_ratio = std::round(ratio * static_cast<double>(result.input_faces));
+    EXPECT_EQ(result.mesh.face_count(),
+              faces > 0 ? static_cast<std::size_t>(faces) : static_cast<std::size_t>(by_ratio));
+  }
 }
 
 TEST(Pipeline, TwoStageReachesTheTargetOnPartsFarApart) {

@@ -23,6 +23,16 @@ constexpr double kInCoreBytesPerFace = 160.0;
 // (654 bytes a cell over 7 MiB); 20 M triangles at 275 k and 1.04 M cells, 198 and 635 MiB. (The 340 taken
 // before, from a billion-triangle run, let --memory-limit 400M peak at 631 MiB on the 20 M scan.)
 constexpr double kClusterBytesPerCell = 660.0;
+// Peak bytes per occupied fine cell while the indexed pass accumulates, the whole vertex array still beside
+// it (it is released once the pass is over, before the octree's merge state grows): on the 20 M scan at 276 k
+// cells, 214 over the array and the process, and 333 with normals and colors, whose per-cell sums (44 bytes:
+// cluster/ keeps normals in floats, colors and texture coordinates in wider sums) are held about three times
+// over in chunks and growing arrays.
+constexpr double kPassBytesPerCell = 220.0;
+constexpr double kPassBytesPerAttributeSumByte = 3.0;
+double pass_bytes_per_cell(bool normals, bool colors, bool uvs) {
+  return kPassBytesPerCell + kPassBytesPerAttributeSumByte * (12.0 * normals + 32.0 * colors + 16.0 * uvs);
+}
 // The fine grid is a power of two, of the level whose occupied cells come nearest the plan: up to about twice
 // the planned number (gen 4 M and 20 M at 140 k and 147 k planned: 262 k and 276 k cells).
 constexpr double kLevelMargin = 2.0;
@@ -73,6 +83,39 @@ double min_fine_per_vertex(bool soup) {
 
 using Clock = std::chrono::steady_clock;
 
+// The bytes of vertex array the input may hold in core (ReadOptions::memory_budget); past them its faces are
+// dereferenced on disk and clustered as a triangle soup. It may hold what the indexed clustering's full plan
+// for twice the target leaves of the budget (at least half of it), and more while the indexed pass at its
+// least plan, the whole vertex array beside its cells, takes no more than the soup's pass at its own least
+// plan: the soup's cells take 8 times the bytes a vertex of the target (1,800 bytes a cell at twice the cells
+// a vertex, against 220 at the margin's count), so out of core pays only for targets far below the input,
+// and where neither path keeps the limit, staying in core is the smaller overshoot (gen 20 M to 200 k faces
+// under 200M: 409 MiB out of core, 179 MiB in core). For a ratio the target comes from the file's announced
+// count; without a count target, half the budget.
+std::uint64_t vertex_allowance(const std::string& input_path, const SimplifyOptions& options, double budget) {
+  std::uint64_t target = options.target_faces;
+  if (options.target_ratio > 0) {
+    const auto by_ratio = static_cast<std::uint64_t>(
+        std::llround(options.target_ratio * static_cast<double>(triangles_hint(input_path))));
+    if (by_ratio > 0) target = target > 0 ? std::min(target, by_ratio) : by_ratio;
+  }
+  double allowance = budget / 2;
+  if (target > 0) {
+    const double fine_per_vertex = options.cluster.fine_cells_per_target;
+    const double full_plan = kLevelMargin * kClusterBytesPerCell *
+                             fine_cells_for(2.0 * static_cast<double>(target), fine_per_vertex);
+    const double least_intermediate = kMinMultiple * static_cast<double>(target);
+    const double indexed_least =
+        kLevelMargin * pass_bytes_per_cell(false, false, false) *
+        fine_cells_for(least_intermediate, fine_per_vertex, 0, min_fine_per_vertex(false));
+    const double soup_least = kSoupClusterBytesPerCell * fine_cells_for(least_intermediate, fine_per_vertex,
+                                                                        0, min_fine_per_vertex(true));
+    allowance = std::max(budget - std::min(budget / 2, full_plan), soup_least - indexed_least);
+  }
+  // At least a byte: 0 would mean no bound at all (a --memory-limit of 1 byte read the input in core).
+  return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(allowance));
+}
+
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
@@ -107,19 +150,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   auto start = Clock::now();
   ReadOptions read;
   read.progress = options.progress;
-  // The vertex array may take what clustering to twice the target leaves of the budget (at least half of
-  // it); past that the reader dereferences the faces on disk and the stream delivers triangle soups, which
-  // the cluster stage takes with memory bounded by its cells.
-  const double fine_per_vertex = options.cluster.fine_cells_per_target;
-  const double cluster_reserve =
-      options.target_faces > 0
-          ? kLevelMargin * kClusterBytesPerCell *
-                fine_cells_for(2.0 * static_cast<double>(options.target_faces), fine_per_vertex)
-          : budget / 2;
-  // At least a byte: 0 would mean no bound at all (a --memory-limit of 1 byte read the input in core).
-  read.memory_budget =
-      std::max<std::uint64_t>(1, static_cast<std::uint64_t>(budget - std::min(budget / 2, cluster_reserve)));
+  read.memory_budget = vertex_allowance(input_path, options, budget);
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
+  const double fine_per_vertex = options.cluster.fine_cells_per_target;
   stage.out_of_core = dereferenced_out_of_core(*stream);
   stage.attributes_left_out = stream->attributes_left_out();
   // The vertex array held through the clustering pass: positions and whatever attributes the reader kept.
@@ -206,11 +239,15 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       fine_cells / (static_cast<double>(cluster_options.target_faces) / 2);
   // Even the fewest fine cells the intermediate can have may not fit: the run goes on (the target comes
   // first), and says what it expects to take, with the planned number of cells rather than the margin's
-  // (a warning at every run whose grid merely could come out larger would be noise). An indexed pass
-  // releases the vertex array as its cells grow.
+  // (a warning at every run whose grid merely could come out larger would be noise). An indexed pass holds
+  // the vertex array beside its accumulating cells, counted at the margin's number as they are the smaller
+  // part, and releases it before the merge state grows.
   const double cells_needed = fine_cells * cell_bytes;
+  const double pass_peak =
+      vertex_bytes +
+      kLevelMargin * fine_cells * pass_bytes_per_cell(held.has_normals(), held.has_colors(), held.has_uvs());
   const double expected_peak =
-      process_bytes + (soup ? held_bytes + cells_needed : std::max(vertex_bytes, cells_needed));
+      process_bytes + (soup ? held_bytes + cells_needed : std::max(pass_peak, cells_needed));
   if (expected_peak > budget) stage.memory_needed = static_cast<std::uint64_t>(expected_peak);
   // The capped fine grid above is the point, so the pass refines it only where it could not even give the
   // decimator its final target (far-apart parts, a far stray point): then the intermediate came out empty.

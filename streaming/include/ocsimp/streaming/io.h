@@ -55,6 +55,11 @@ struct ReadOptions {
 
 std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
                                                      const ReadOptions& options = {});
+// The triangle count to plan for before opening `path` (which may read all of its vertices): a PLY's
+// header count, bounded by what the file could hold; an estimate from an OBJ's size (a face line per 40
+// bytes); 0 where that is unknown (triangle strips, STL, Draco, a file that does not parse, which the
+// reader will report). Like TriangleStream::triangles_hint, only a hint.
+std::uint64_t triangles_hint(const std::string& path);
 // Whether `stream` dereferences its faces on disk (opened past ReadOptions::memory_budget).
 bool dereferenced_out_of_core(const TriangleStream& stream);
 // The read buffers such a stream holds while it delivers its triangles (one per partition of the vertex

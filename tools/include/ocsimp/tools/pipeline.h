@@ -36,8 +36,9 @@ struct SimplifyOptions {
 
   // Bound on peak memory, in bytes. 0: a third of physical memory. It decides whether the input is decimated
   // in core or clustered first, how large the intermediate mesh may be, and whether the input's vertex array
-  // may be held at all: it gets what clustering to twice the target leaves (at least half the budget), and
-  // past that the faces are dereferenced on disk under TMPDIR (io.h, ReadOptions::memory_budget).
+  // may be held at all: it gets what clustering to twice the target leaves (at least half the budget, and
+  // more where clustering it in core would still take less than clustering its faces as a soup), and past
+  // that the faces are dereferenced on disk under TMPDIR (io.h, ReadOptions::memory_budget).
   std::uint64_t memory_limit = 0;
   // Cluster first even when the input would fit in core (to study the stages on any mesh). An input no larger
   // than the intermediate (at least 2^18 faces unless `intermediate` is set) is still decimated directly:
