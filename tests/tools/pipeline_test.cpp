@@ -2,9 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string_view>
 #include <tuple>
+#include <vector>
 
 #include "ocsimp/cluster/cluster.h"
 #include "ocsimp/core/error.h"
@@ -307,6 +310,52 @@ TEST(Pipeline, KeepsTheVerticesInCoreWhereClusteringThemAsASoupWouldTakeMore) {
     const double by_ratio = std::round(ratio * static_cast<double>(result.input_faces));
     EXPECT_EQ(result.mesh.face_count(),
               faces > 0 ? static_cast<std::size_t>(faces) : static_cast<std::size_t>(by_ratio));
+  }
+}
+
+TEST(Pipeline, WarnsOfAMemoryPlanOverTheLimitBeforeClustering) {
+  // A user should learn that the limit will not hold before the long stages, not after them.
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);
+  std::vector<std::string> events;
+  for (const bool lod_chain : {false, true}) {
+    SCOPED_TRACE(lod_chain ? "lod" : "simplify");
+    events.clear();
+    const ProgressFn progress = [&](std::string_view phase, std::uint64_t, std::uint64_t) {
+      if (events.empty() || events.back() != phase) events.emplace_back(phase);
+    };
+    const WarningFn warn = [&](const std::string& message) { events.push_back("warning: " + message); };
+    std::uint64_t memory_needed = 0;
+    if (lod_chain) {
+      LodOptions options;
+      options.level_faces = {3'000, 1'000};
+      options.memory_limit = 256 << 10;
+      options.progress = progress;
+      options.warn = warn;
+      memory_needed = lod(path, options).memory_needed;
+    } else {
+      SimplifyOptions options;
+      options.target_faces = 3'000;
+      options.memory_limit = 256 << 10;
+      options.progress = progress;
+      options.warn = warn;
+      memory_needed = simplify(path, options).memory_needed;
+    }
+    EXPECT_GT(memory_needed, 256u << 10);
+    const auto warning = std::find_if(events.begin(), events.end(),
+                                      [](const std::string& e) { return e.starts_with("warning: "); });
+    ASSERT_NE(warning, events.end());
+    EXPECT_NE(warning->find("expected to take about " + format_bytes(memory_needed)), std::string::npos)
+        << *warning;
+    EXPECT_EQ(std::count_if(events.begin(), events.end(),
+                            [](const std::string& e) { return e.starts_with("warning: "); }),
+              1);
+    // Nothing of the clustering or the decimation has been reported before it.
+    for (auto e = events.begin(); e != warning; ++e) {
+      EXPECT_FALSE(e->starts_with("cluster") || e->starts_with("decimate")) << *e;
+    }
+    EXPECT_TRUE(
+        std::any_of(warning, events.end(), [](const std::string& e) { return e.starts_with("cluster"); }));
   }
 }
 

@@ -25,6 +25,11 @@ struct ProgressBar {
   bool line_open = false;
 
   void update(std::string_view new_phase, std::uint64_t done, std::uint64_t total) {
+    if (new_phase.empty()) {  // make_warning's call: a line of its own for the warning
+      finish_line();
+      phase.clear();
+      return;
+    }
     const auto now = Clock::now();
     if (new_phase != phase) {
       finish_line();
@@ -234,20 +239,11 @@ void check_report_destination(const std::string& report, const std::vector<std::
   }
 }
 
-void warn_attributes_left_out(const std::string& input, const std::string& left_out) {
-  if (left_out.empty()) return;
-  std::fprintf(stderr,
-               "ocsimp: warning: %s: its %s are not in the output: past the memory limit an OBJ's vertices "
-               "are read from disk as positions only (a PLY's keep their attributes)\n",
-               input.c_str(), left_out.c_str());
-}
-
-void warn_memory_needed(const std::string& input, std::uint64_t needed, std::uint64_t limit) {
-  if (needed == 0) return;
-  std::fprintf(stderr,
-               "ocsimp: warning: %s: clustering to the target is expected to take about %s, over the memory "
-               "limit of %s (a larger --memory-limit or a smaller target keeps within it)\n",
-               input.c_str(), format_bytes(needed).c_str(), format_bytes(limit).c_str());
+WarningFn make_warning(const std::string& input, const ProgressFn& progress) {
+  return [input, progress](const std::string& message) {
+    if (progress) progress("", 0, 0);
+    std::fprintf(stderr, "ocsimp: warning: %s: %s\n", input.c_str(), message.c_str());
+  };
 }
 
 void write_json_report(const std::string& path, const nlohmann::json& report) {

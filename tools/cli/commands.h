@@ -69,11 +69,9 @@ void check_report_destination(const std::string& report, const std::vector<std::
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
 
-// The warning that the input's vertex attributes (`left_out`, as SimplifyResult lists them) are not in the
-// output; nothing when the list is empty.
-void warn_attributes_left_out(const std::string& input, const std::string& left_out);
-// Warns when the memory limit was too small for the target (SimplifyResult::memory_needed).
-void warn_memory_needed(const std::string& input, std::uint64_t needed, std::uint64_t limit);
+// Prints a pipeline's warnings (SimplifyOptions::warn) on stderr as they come, even with --quiet, naming
+// `input`, on a line of their own below a progress bar drawn by `progress`.
+WarningFn make_warning(const std::string& input, const ProgressFn& progress);
 
 double seconds_since(std::chrono::steady_clock::time_point start);
 

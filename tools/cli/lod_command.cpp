@@ -107,6 +107,7 @@ void add_lod_command(CLI::App& app) {
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;
+    options.warn = make_warning(flags->input, progress);
     std::vector<std::string> files;
     std::vector<std::size_t> vertices;
     WriteOptions write;
@@ -152,8 +153,6 @@ void add_lod_command(CLI::App& app) {
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);
     }
-    warn_attributes_left_out(flags->input, result.attributes_left_out);
-    warn_memory_needed(flags->input, result.memory_needed, result.memory_limit);
     for (const LodLevel& level : result.levels) {
       if (!level.decimate.target_reached && !level.decimate.reason.empty()) {
         std::fprintf(stderr, "ocsimp: warning: level %llu: %s\n",

@@ -89,6 +89,7 @@ void add_simplify_command(CLI::App& app) {
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;
+    options.warn = make_warning(flags->input, progress);
     const auto start = std::chrono::steady_clock::now();
     SimplifyResult result = simplify(flags->input, options);
     const auto write_start = std::chrono::steady_clock::now();
@@ -122,8 +123,6 @@ void add_simplify_command(CLI::App& app) {
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);
     }
-    warn_attributes_left_out(flags->input, result.attributes_left_out);
-    warn_memory_needed(flags->input, result.memory_needed, result.memory_limit);
     if (!result.decimate.target_reached && !result.decimate.reason.empty()) {
       std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", result.decimate.reason.c_str());
     }

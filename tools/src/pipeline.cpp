@@ -155,6 +155,11 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const double fine_per_vertex = options.cluster.fine_cells_per_target;
   stage.out_of_core = dereferenced_out_of_core(*stream);
   stage.attributes_left_out = stream->attributes_left_out();
+  if (!stage.attributes_left_out.empty() && options.warn) {
+    options.warn("its " + stage.attributes_left_out +
+                 " are not in the output: past the memory limit an OBJ's vertices are read from disk as "
+                 "positions only (a PLY's keep their attributes)");
+  }
   // The vertex array held through the clustering pass: positions and whatever attributes the reader kept.
   const IndexedMesh& held = stream->vertices();
   const double vertex_bytes = static_cast<double>(
@@ -248,7 +253,14 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       kLevelMargin * fine_cells * pass_bytes_per_cell(held.has_normals(), held.has_colors(), held.has_uvs());
   const double expected_peak =
       process_bytes + (soup ? held_bytes + cells_needed : std::max(pass_peak, cells_needed));
-  if (expected_peak > budget) stage.memory_needed = static_cast<std::uint64_t>(expected_peak);
+  if (expected_peak > budget) {
+    stage.memory_needed = static_cast<std::uint64_t>(expected_peak);
+    if (options.warn) {
+      options.warn("clustering to the target is expected to take about " + format_bytes(stage.memory_needed) +
+                   ", over the memory limit of " + format_bytes(stage.memory_limit) +
+                   " (a larger memory limit or a smaller target keeps within it)");
+    }
+  }
   // The capped fine grid above is the point, so the pass refines it only where it could not even give the
   // decimator its final target (far-apart parts, a far stray point): then the intermediate came out empty.
   // With an error bound alone, a quarter of the intermediate's vertices: a surface spanning its box gets
@@ -407,6 +419,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   first.two_stage = options.two_stage;
   first.intermediate = options.intermediate;
   first.cluster = options.cluster;
+  first.warn = options.warn;
   first.threads = options.threads;
   first.progress = options.progress;
   check_common(first);

@@ -27,6 +27,9 @@
 
 namespace ocsimp {
 
+// Receives a warning as one sentence, without the input's name.
+using WarningFn = std::function<void(const std::string& message)>;
+
 struct SimplifyOptions {
   // Stopping criteria, as DecimateOptions has them: an exact face count, a ratio of the input's faces, an
   // error bound as a distance in model units. At least one; with several, whichever comes first.
@@ -53,6 +56,10 @@ struct SimplifyOptions {
 
   int threads = 0;  // 0: all cores; the output does not depend on it
   ProgressFn progress;
+  // Called with each warning as soon as the run can tell, before its long stages: the memory plan is over the
+  // limit (SimplifyResult::memory_needed), an OBJ's attributes are left out (attributes_left_out). The result
+  // records both either way.
+  WarningFn warn;
 };
 
 // The memory budget in force for `memory_limit` (0: a third of physical memory).
@@ -106,6 +113,7 @@ struct LodOptions {
   DecimateOptions decimate;  // targets and output_quadrics are set per level
   int threads = 0;
   ProgressFn progress;
+  WarningFn warn;
 
   // Called with each level as soon as it exists, largest first (e.g. to write it). When set, the meshes are
   // not kept in LodResult, so memory holds at most two levels at a time.
