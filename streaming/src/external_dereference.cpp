@@ -22,7 +22,7 @@ namespace {
 
 static_assert(sizeof(Vec3f) == 12 && sizeof(Triangle) == 12);
 
-// A position: what the budget counts per vertex of an OBJ, whose attributes are not known up front.
+// A position: what the budget counts per vertex of an OBJ, whose colors are not known up front.
 constexpr std::uint64_t kVertexBytes = 12;
 // Enough partitions for a budget 64 times smaller than the vertex array; a smaller budget is exceeded (each
 // partition then holds 1/64 of the vertices) rather than the time growing with it: each partition is one
@@ -393,9 +393,9 @@ class DereferencedStream final : public TriangleStream {
     vertex_count_ = spool_.count();
     bytes_total_ = inner_->bytes_total();
     if (!spool_.spilled()) {
-      // They fit after all (OBJ says no count up front). The reader above kept positions only, so the file
-      // is read again by the plain one, which keeps its normals, colors and texture coordinates: a second
-      // read of a file that fits, where dropping them went unsaid.
+      // They fit after all (OBJ says no count up front). The reader above kept positions and colors only,
+      // so the file is read again by the plain one, which keeps its normals and texture coordinates: a
+      // second read of a file that fits, where dropping them went unsaid.
       spool_.release();
       ReadOptions plain = options;
       plain.memory_budget = 0;

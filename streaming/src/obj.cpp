@@ -62,6 +62,8 @@ Keyword classify(std::string_view line, const char*& rest) {
   return Keyword::other;
 }
 
+constexpr Color kWhite{255, 255, 255, 255};  // a vertex without colors in a file where others have them
+
 std::uint8_t color_channel(float value) {
   return static_cast<std::uint8_t>(std::clamp(value, 0.0f, 1.0f) * 255.0f + 0.5f);
 }
@@ -128,7 +130,7 @@ class ObjStream final : public TriangleStream {
   const std::string& path() const override { return reader_.path(); }
   std::string attributes_left_out() const override {
     if (!vertex_sink_) return {};
-    return attribute_list(total_.vn > 0, sink_saw_colors_, total_.vt > 0);
+    return attribute_list(total_.vn > 0, sink_dropped_colors_, total_.vt > 0);
   }
 
  private:
@@ -247,21 +249,28 @@ class ObjStream final : public TriangleStream {
     } else {
       bounds_.add(position);
     }
+    const bool has_color = count >= 6;
+    const float* rgb = values + (count - 3);
+    const Color color =
+        has_color ? Color{color_channel(rgb[0]), color_channel(rgb[1]), color_channel(rgb[2]), 255} : kWhite;
     if (vertex_sink_) {
       sink_buffer_.push_back(position);
-      sink_saw_colors_ = sink_saw_colors_ || count >= 6;
+      // Colors go with the positions when a vertex of the first chunk has them (the spool's records are
+      // fixed by it); vertices without them are white, as in core.
+      const bool carried =
+          sink_colors_ == SinkColors::carried ||
+          (sink_colors_ == SinkColors::undecided && (has_color || !sink_colors_buffer_.empty()));
+      if (carried) {
+        if (sink_colors_buffer_.empty()) sink_colors_buffer_.assign(sink_buffer_.size() - 1, kWhite);
+        sink_colors_buffer_.push_back(color);
+      } else if (has_color) {
+        sink_dropped_colors_ = true;
+      }
     } else {
       vertices_.positions.push_back(position);
-      const bool has_color = count >= 6;
       if (has_color && vertices_.colors.empty())
-        vertices_.colors.assign(vertices_.positions.size() - 1, Color{255, 255, 255, 255});
-      if (has_color) {
-        const float* rgb = values + (count - 3);
-        vertices_.colors.push_back(
-            {color_channel(rgb[0]), color_channel(rgb[1]), color_channel(rgb[2]), 255});
-      } else if (!vertices_.colors.empty()) {
-        vertices_.colors.push_back({255, 255, 255, 255});
-      }
+        vertices_.colors.assign(vertices_.positions.size() - 1, kWhite);
+      if (has_color || !vertices_.colors.empty()) vertices_.colors.push_back(color);
     }
     if (!origin_sample_.settled && origin_sample_.full()) settle_origin();
     if (vertex_sink_ && sink_buffer_.size() == kSinkChunk) flush_sink();
@@ -298,7 +307,7 @@ class ObjStream final : public TriangleStream {
     float values[3];
     const int count = parse_numbers(p, end, values, 3);
     if (count == 0) fail("a texture coordinate needs u [v [w]]");
-    if (vertex_sink_) return;  // out of core: positions only
+    if (vertex_sink_) return;  // out of core: per-corner records are left out
     uv_records_.emplace_back(values[0], count > 1 ? values[1] : 0.0f);
   }
 
@@ -371,10 +380,14 @@ class ObjStream final : public TriangleStream {
 
   void flush_sink() {
     if (sink_buffer_.empty()) return;
+    if (sink_colors_ == SinkColors::undecided)
+      sink_colors_ = sink_colors_buffer_.empty() ? SinkColors::none : SinkColors::carried;
     VertexChunk chunk;
     chunk.positions = sink_buffer_;
+    chunk.colors = sink_colors_buffer_;
     vertex_sink_(chunk);
     sink_buffer_.clear();
+    sink_colors_buffer_.clear();
   }
 
   // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn.
@@ -432,9 +445,14 @@ class ObjStream final : public TriangleStream {
   LineReader lines_;
   std::size_t capacity_;
   ProgressFn progress_;
-  // Out of core (ReadOptions::vertex_sink): positions go there a chunk at a time; no vertex array is kept.
+  // Out of core (ReadOptions::vertex_sink): positions and colors go there a chunk at a time; no vertex array
+  // is kept.
   std::function<void(const VertexChunk&)> vertex_sink_;
-  bool sink_saw_colors_ = false;  // out of core: a vertex line had colors, which the sink does not take
+  // Out of core, whether vertex colors go to the sink: decided by its first chunk.
+  enum class SinkColors { undecided, carried, none };
+  SinkColors sink_colors_ = SinkColors::undecided;
+  std::vector<Color> sink_colors_buffer_;
+  bool sink_dropped_colors_ = false;  // a vertex after the first chunk had colors, which the sink cannot take
   OriginSample origin_sample_{{}, /*settled=*/false};  // OBJ text is more precise than floats
   std::vector<Vec3f> sink_buffer_;
   static constexpr std::size_t kSinkChunk = 1 << 16;

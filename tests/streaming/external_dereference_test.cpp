@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "io_test_util.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/io.h"
 #include "test_support.h"
@@ -328,9 +329,54 @@ TEST(ExternalDereference, AnObjThatFitsAfterAllKeepsItsAttributes) {
   EXPECT_EQ(through.triangles, direct.triangles);
 }
 
+// An OBJ's vertex colors are optional per line. Out of core they ride when a vertex of the first chunk of
+// 65,536 has them (the others then white, as in core); colors that first appear later cannot join the
+// spooled records, and the stream names them as left out instead of dropping them silently.
+TEST(ExternalDereference, OutOfCoreObjColorsFromTheFirstChunkOnRideWithTheirPositions) {
+  const TestFolders folders;
+  const std::size_t n = 70'000;  // past the first chunk
+  auto write_strip = [&](const std::string& path, std::size_t colored_from) {
+    std::string text;
+    for (std::size_t i = 0; i < n; ++i) {
+      text += "v " + std::to_string(i % 2) + " " + std::to_string(i / 2) + " 0";
+      if (i >= colored_from) text += " 1 0 0.5";
+      text += "\n";
+    }
+    for (std::size_t i = 0; i + 2 < n; ++i)
+      text += "f " + std::to_string(i + 1) + " " + std::to_string(i + 2) + " " + std::to_string(i + 3) + "\n";
+    test::write_file_bytes(path, text);
+  };
+  ReadOptions options;
+  options.memory_budget = 4096;
+  for (const auto& [colored_from, left_out] :
+       {std::pair<std::size_t, std::string>{1, ""}, {65'536, "colors"}}) {
+    SCOPED_TRACE(colored_from);
+    const std::string path = folders.dir / ("strip_" + std::to_string(colored_from) + ".obj");
+    write_strip(path, colored_from);
+    std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+    ASSERT_TRUE(dereferenced_out_of_core(*stream));
+    EXPECT_EQ(stream->attributes_left_out(), left_out);
+    const IndexedMesh welded = read_mesh(*stream);
+    ASSERT_EQ(welded.vertex_count(), n);
+    if (!left_out.empty()) {
+      EXPECT_TRUE(welded.colors.empty());
+      continue;
+    }
+    ASSERT_EQ(welded.colors.size(), n);
+    for (std::size_t v = 0; v < n; ++v) {
+      // Welded vertices are numbered by first use: position (i % 2, i / 2) is vertex i of the file.
+      const Vec3f p = welded.positions[v];
+      const auto i = static_cast<std::size_t>(2 * p.y() + p.x());
+      const Color expected = i >= colored_from ? Color{255, 0, 128, 255} : Color{255, 255, 255, 255};
+      ASSERT_EQ(welded.colors[v], expected) << "file vertex " << i;
+    }
+  }
+}
+
 // Out of core a PLY's corners carry its vertices' normals, colors and texture coordinates, bit for bit, in
-// binary and ASCII files alike. An OBJ indexes its attributes per corner, which the out-of-core pass does not
-// follow: its stream says what it leaves out, for the warning.
+// binary and ASCII files alike, and an OBJ's its vertex colors. An OBJ indexes its normals and texture
+// coordinates per corner, which the out-of-core pass does not follow: its stream says what it leaves out,
+// for the warning.
 TEST(ExternalDereference, OutOfCorePlyCornersCarryTheVertexAttributes) {
   const TestFolders folders;
   IndexedMesh mesh = shuffled_grid(30);
@@ -391,12 +437,27 @@ TEST(ExternalDereference, OutOfCorePlyCornersCarryTheVertexAttributes) {
       }
     }
   }
+  // An OBJ's colors belong to its positions and ride with them, its normals and uvs do not.
+  const IndexedMesh direct_obj = read_mesh(obj);
+  ASSERT_EQ(direct_obj.colors.size(), n);
   std::unique_ptr<TriangleStream> from_obj = open_dereferenced_stream(obj, options);
   EXPECT_TRUE(dereferenced_out_of_core(*from_obj));
-  EXPECT_EQ(from_obj->attributes_left_out(), "normals, colors and texture coordinates");
+  EXPECT_EQ(from_obj->attributes_left_out(), "normals and texture coordinates");
   TriangleBatch batch;
-  ASSERT_TRUE(from_obj->next(batch));
-  EXPECT_TRUE(batch.corner_normals.empty() && batch.corner_colors.empty() && batch.corner_uvs.empty());
+  std::size_t f = 0;
+  while (from_obj->next(batch)) {
+    ASSERT_EQ(batch.corner_colors.size(), batch.corners.size());
+    EXPECT_TRUE(batch.corner_normals.empty() && batch.corner_uvs.empty());
+    for (std::size_t i = 0; i < batch.corners.size(); ++i, ++f) {
+      ASSERT_LT(f, direct_obj.face_count());
+      for (int k = 0; k < 3; ++k) {
+        const Index v = direct_obj.triangles[f][k];
+        ASSERT_EQ(batch.corners[i][k], direct_obj.positions[v]) << "face " << f;
+        ASSERT_EQ(batch.corner_colors[i][k], direct_obj.colors[v]) << "face " << f;
+      }
+    }
+  }
+  EXPECT_EQ(f, direct_obj.face_count());
   std::unique_ptr<TriangleStream> from_plain = open_dereferenced_stream(plain, options);
   EXPECT_TRUE(dereferenced_out_of_core(*from_plain));
   EXPECT_EQ(from_plain->attributes_left_out(), "");

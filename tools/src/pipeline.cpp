@@ -157,8 +157,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   stage.attributes_left_out = stream->attributes_left_out();
   if (!stage.attributes_left_out.empty() && options.warn) {
     options.warn("its " + stage.attributes_left_out +
-                 " are not in the output: past the memory limit an OBJ's vertices are read from disk as "
-                 "positions only (a PLY's keep their attributes)");
+                 " are not in the output: past the memory limit an OBJ's corners are read from disk with "
+                 "their positions and vertex colors only (a PLY's keep all their attributes)");
   }
   // The vertex array held through the clustering pass: positions and whatever attributes the reader kept.
   const IndexedMesh& held = stream->vertices();

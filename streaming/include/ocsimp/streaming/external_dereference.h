@@ -10,9 +10,10 @@
 // next unread one of its partition's region, so it delivers the faces in file order as triangle soups.
 //
 // A record is a vertex's position and the attributes its reader delivers: a PLY's normals, colors and
-// texture coordinates (R = 12 bytes, + 12, + 4, + 8), which reach the soup's corners. An OBJ indexes its
-// attributes per corner, separately from its positions; its records are positions only, and the stream
-// names what it leaves out (TriangleStream::attributes_left_out).
+// texture coordinates (R = 12 bytes, + 12, + 4, + 8), which reach the soup's corners. An OBJ's records are
+// its positions and their colors (when a vertex of its first 65,536 has them); it indexes normals and
+// texture coordinates per corner, separately from its positions, and the stream names them as left out
+// (TriangleStream::attributes_left_out).
 //
 // Memory: the budget (one partition, or the read buffers of every partition) plus a few buffers; at most 64
 // partitions, as each costs a scan of the index file, so below a 64th of the vertex array the budget is

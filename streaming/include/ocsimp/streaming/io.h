@@ -41,8 +41,8 @@ struct ReadOptions {
   // position, and for a PLY 12 more for normals, 4 for colors and 8 for texture coordinates where it has
   // them. Past it, open_triangle_stream dereferences the faces out of core (external_dereference.h): the
   // stream then delivers triangle soups in the file's face order, their corners carrying a PLY's per-vertex
-  // normals, colors and texture coordinates (an OBJ's, which it indexes per corner, are dropped and named by
-  // TriangleStream::attributes_left_out).
+  // normals, colors and texture coordinates, and an OBJ's vertex colors (its normals and texture
+  // coordinates, which it indexes per corner, are dropped and named by TriangleStream::attributes_left_out).
   std::uint64_t memory_budget = 0;
   // For the out-of-core path: when set, an indexed reader hands its vertices to this sink in file order, a
   // chunk at a time, and keeps no vertex array; next() still yields indices into the file's vertices and

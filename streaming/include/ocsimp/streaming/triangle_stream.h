@@ -72,7 +72,8 @@ class TriangleStream {
   virtual const std::string& path() const = 0;
 
   // Vertex attributes the file has that this stream does not deliver, as a list ("normals and colors"): an
-  // OBJ dereferenced out of core delivers corner positions only. Empty when nothing is left out.
+  // OBJ dereferenced out of core delivers its corners' positions and vertex colors only. Empty when nothing
+  // is left out.
   virtual std::string attributes_left_out() const { return {}; }
 };
 
