@@ -50,6 +50,13 @@ struct RecordLayout {
     if (colors) out = put(out, chunk.colors[i]);
     if (uvs) put(out, chunk.uvs[i]);
   }
+  // A vertex from `in`, appended to `mesh`'s arrays.
+  void unpack(const std::uint8_t* in, IndexedMesh& mesh) const {
+    in = get(in, mesh.positions.emplace_back());
+    if (normals) in = get(in, mesh.normals.emplace_back());
+    if (colors) in = get(in, mesh.colors.emplace_back());
+    if (uvs) get(in, mesh.uvs.emplace_back());
+  }
   // Corner k of the batch's last triangle from `in`.
   void unpack(const std::uint8_t* in, TriangleBatch& batch, int k) const {
     in = get(in, batch.corners.back()[k]);
@@ -356,6 +363,19 @@ class VertexSpool {
 
   // The vertices held in memory, freed (they fit after all; the plain reader loads them again).
   void release() { blocks_ = {}; }
+  // The vertices held in memory, moved to `mesh`'s arrays a block at a time (they fit after all).
+  void unpack_into(IndexedMesh& mesh) {
+    mesh.positions.reserve(count_);
+    if (layout_.normals) mesh.normals.reserve(count_);
+    if (layout_.colors) mesh.colors.reserve(count_);
+    if (layout_.uvs) mesh.uvs.reserve(count_);
+    const std::size_t record = layout_.bytes();
+    for (std::vector<std::uint8_t>& block : blocks_) {
+      for (std::size_t at = 0; at < block.size(); at += record) layout_.unpack(block.data() + at, mesh);
+      block = {};
+    }
+    blocks_ = {};
+  }
   bool spilled() const { return file_.has_value(); }
   std::uint64_t count() const { return count_; }
   const RecordLayout& layout() const { return layout_; }
@@ -392,10 +412,17 @@ class DereferencedStream final : public TriangleStream {
     vertices_.origin = inner_->vertices().origin;  // the spooled positions and corners are relative to it
     vertex_count_ = spool_.count();
     bytes_total_ = inner_->bytes_total();
+    if (!spool_.spilled() && inner_->attributes_left_out().empty()) {
+      // They fit after all (OBJ says no count up front), and the reader left nothing out: its records are the
+      // vertex array, and it goes on with the faces.
+      spool_.unpack_into(vertices_);
+      vertices_from_spool_ = true;
+      return;
+    }
     if (!spool_.spilled()) {
-      // They fit after all (OBJ says no count up front). The reader above kept positions and colors only,
-      // so the file is read again by the plain one, which keeps its normals and texture coordinates: a
-      // second read of a file that fits, where dropping them went unsaid.
+      // They fit after all, but the reader above kept positions and colors only, so the file is read again
+      // by the plain one, which keeps its normals and texture coordinates: a second read of a file that
+      // fits, where dropping them went unsaid.
       spool_.release();
       ReadOptions plain = options;
       plain.memory_budget = 0;
@@ -438,7 +465,9 @@ class DereferencedStream final : public TriangleStream {
     return true;
   }
 
-  const IndexedMesh& vertices() const override { return inner_ ? inner_->vertices() : vertices_; }
+  const IndexedMesh& vertices() const override {
+    return inner_ && !vertices_from_spool_ ? inner_->vertices() : vertices_;
+  }
   Box3 bounds() override { return inner_ ? inner_->bounds() : bounds_; }
   std::string attributes_left_out() const override { return left_out_; }
   std::uint64_t triangles_hint() const override { return inner_ ? inner_->triangles_hint() : triangles_; }
@@ -524,7 +553,8 @@ class DereferencedStream final : public TriangleStream {
   // constructing, the reader in sink mode).
   std::unique_ptr<TriangleStream> inner_;
   std::string left_out_;  // what the sink-mode reader left out (TriangleStream::attributes_left_out)
-  IndexedMesh vertices_;
+  IndexedMesh vertices_;  // out of core: its origin only; or the spooled vertices when they fit after all
+  bool vertices_from_spool_ = false;
   Box3 bounds_;
   std::uint64_t vertex_count_ = 0;
   std::uint64_t bytes_total_ = 0;
