@@ -187,7 +187,14 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const double cell_bytes = soup ? kSoupClusterBytesPerCell : kClusterBytesPerCell;
   const double held_bytes = soup ? static_cast<double>(dereference_buffer_bytes(*stream)) : vertex_bytes;
   const double min_per_vertex = min_fine_per_vertex(soup);
-  const double cell_room = std::max(0.0, budget - held_bytes) / (kLevelMargin * cell_bytes);
+  // The indexed pass holds the vertex array beside its accumulating cells only, and releases it before the
+  // merge state grows; a soup's buffers stay beside all of it. Both beside the process itself.
+  const double pass_bytes = pass_bytes_per_cell(held.has_normals(), held.has_colors(), held.has_uvs());
+  const double free_bytes = std::max(0.0, budget - process_bytes);
+  const double cell_room =
+      soup ? std::max(0.0, free_bytes - held_bytes) / (kLevelMargin * cell_bytes)
+           : std::min(std::max(0.0, free_bytes - vertex_bytes) / (kLevelMargin * pass_bytes),
+                      free_bytes / (kLevelMargin * cell_bytes));
   const double cluster_room =
       2.0 * cell_room /
       (cell_room < kMaxFineCells ? fine_per_vertex : std::min(min_per_vertex, fine_per_vertex));
@@ -248,9 +255,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // the vertex array beside its accumulating cells, counted at the margin's number as they are the smaller
   // part, and releases it before the merge state grows.
   const double cells_needed = fine_cells * cell_bytes;
-  const double pass_peak =
-      vertex_bytes +
-      kLevelMargin * fine_cells * pass_bytes_per_cell(held.has_normals(), held.has_colors(), held.has_uvs());
+  const double pass_peak = vertex_bytes + kLevelMargin * fine_cells * pass_bytes;
   const double expected_peak =
       process_bytes + (soup ? held_bytes + cells_needed : std::max(pass_peak, cells_needed));
   if (expected_peak > budget) {
