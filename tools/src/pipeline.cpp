@@ -157,8 +157,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   stage.attributes_left_out = stream->attributes_left_out();
   if (!stage.attributes_left_out.empty() && options.warn) {
     options.warn("its " + stage.attributes_left_out +
-                 " are not in the output: past the memory limit an OBJ's corners are read from disk with "
-                 "their positions and vertex colors only (a PLY's keep all their attributes)");
+                 " are not in the output: past the memory limit an OBJ's faces are read from disk with their "
+                 "positions, and with vertex colors when its first 65,536 vertices have some; normals and "
+                 "texture coordinates, which it indexes per corner, are left out (a PLY keeps them all)");
   }
   // The vertex array held through the clustering pass: positions and whatever attributes the reader kept.
   const IndexedMesh& held = stream->vertices();
