@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <optional>
+#include <string_view>
 #include <vector>
 
 #include "byte_reader.h"
@@ -422,11 +423,17 @@ class DereferencedStream final : public TriangleStream {
     if (!spool_.spilled()) {
       // They fit after all, but the reader above kept positions and colors only, so the file is read again
       // by the plain one, which keeps its normals and texture coordinates: a second read of a file that
-      // fits, where dropping them went unsaid.
+      // fits, where dropping them went unsaid. Its progress is a phase of its own, not the first one over.
       spool_.release();
       ReadOptions plain = options;
       plain.memory_budget = 0;
       plain.vertex_sink = nullptr;
+      if (options.progress) {
+        plain.progress = [progress = options.progress](std::string_view phase, std::uint64_t done,
+                                                       std::uint64_t total) {
+          progress(phase == "read" ? "read again" : phase, done, total);
+        };
+      }
       inner_ = open_triangle_stream(path, plain);
       return;
     }

@@ -334,39 +334,51 @@ TEST(ExternalDereference, AnObjThatFitsAfterAllKeepsItsAttributes) {
 
 // Without normals or texture coordinates, an OBJ whose vertices turn out to fit needs no second read: the
 // spooled records are its vertex array, with their colors, and the reader goes on with the faces. Its
-// progress then runs once from start to end (a second read started it over).
-TEST(ExternalDereference, AnObjThatFitsAfterAllWithoutCornerAttributesIsReadOnce) {
+// progress then runs once from start to end (a second read started it over). With normals it is read again
+// to keep them, and that read reports a phase of its own.
+TEST(ExternalDereference, AnObjThatFitsAfterAllIsReadAgainOnlyForItsCornerAttributes) {
   const TestFolders folders;
-  const std::string path = folders.dir / "coloured.obj";
-  {
-    std::ofstream out(path);
-    const int side = 400;  // 160 k vertices, 318 k triangles: about 11 MB, past the 8 MB progress step
-    for (int y = 0; y < side; ++y)
-      for (int x = 0; x < side; ++x) out << "v " << x << ' ' << y << " 0 " << (x % 2) << " 0.5 1\n";
-    for (int y = 0; y + 1 < side; ++y) {
-      for (int x = 0; x + 1 < side; ++x) {
-        const int a = y * side + x + 1;
-        out << "f " << a << ' ' << a + 1 << ' ' << a + side + 1 << "\nf " << a << ' ' << a + side + 1 << ' '
-            << a + side << '\n';
+  for (const bool normals : {false, true}) {
+    SCOPED_TRACE(normals ? "with normals" : "without normals");
+    const std::string path = folders.dir / (normals ? "normals.obj" : "coloured.obj");
+    {
+      std::ofstream out(path);
+      const int side = 400;  // 160 k vertices, 318 k triangles: about 11 MB, past the 8 MB progress step
+      for (int y = 0; y < side; ++y)
+        for (int x = 0; x < side; ++x) out << "v " << x << ' ' << y << " 0 " << (x % 2) << " 0.5 1\n";
+      if (normals) out << "vn 0 0 1\n";
+      const char* corner = normals ? "//1 " : " ";
+      for (int y = 0; y + 1 < side; ++y) {
+        for (int x = 0; x + 1 < side; ++x) {
+          const int a = y * side + x + 1;
+          out << "f " << a << corner << a + 1 << corner << a + side + 1 << corner << "\nf " << a << corner
+              << a + side + 1 << corner << a + side << corner << '\n';
+        }
       }
     }
+    std::vector<std::string> phases;
+    std::vector<std::uint64_t> done;  // of each phase, in turn
+    ReadOptions options;
+    options.memory_budget = 4u << 20;  // the size could hold 1.4 M vertices; the 160 k take 2.5 MB
+    options.progress = [&](std::string_view phase, std::uint64_t at, std::uint64_t) {
+      if (phases.empty() || phases.back() != phase) phases.emplace_back(phase);
+      done.push_back(at + (phases.size() - 1) * (std::uint64_t{1} << 40));
+    };
+    std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
+    ASSERT_FALSE(dereferenced_out_of_core(*stream));
+    EXPECT_EQ(stream->attributes_left_out(), "");
+    const IndexedMesh through = read_mesh(*stream);
+    const IndexedMesh direct = read_mesh(path);
+    EXPECT_EQ(through.positions, direct.positions);
+    EXPECT_EQ(through.colors, direct.colors);
+    EXPECT_EQ(through.normals, direct.normals);
+    EXPECT_EQ(through.triangles, direct.triangles);
+    const std::vector<std::string> expected_phases =
+        normals ? std::vector<std::string>{"read", "read again"} : std::vector<std::string>{"read"};
+    EXPECT_EQ(phases, expected_phases);
+    ASSERT_GE(done.size(), 2u);
+    EXPECT_EQ(std::adjacent_find(done.begin(), done.end(), std::greater_equal<>()), done.end());
   }
-  std::vector<std::uint64_t> done;
-  ReadOptions options;
-  options.memory_budget = 4u << 20;  // the size could hold 1.4 M vertices; the 160 k take 2.5 MB
-  options.progress = [&](std::string_view phase, std::uint64_t at, std::uint64_t) {
-    if (phase == "read") done.push_back(at);
-  };
-  std::unique_ptr<TriangleStream> stream = open_dereferenced_stream(path, options);
-  ASSERT_FALSE(dereferenced_out_of_core(*stream));
-  EXPECT_EQ(stream->attributes_left_out(), "");
-  const IndexedMesh through = read_mesh(*stream);
-  const IndexedMesh direct = read_mesh(path);
-  EXPECT_EQ(through.positions, direct.positions);
-  EXPECT_EQ(through.colors, direct.colors);
-  EXPECT_EQ(through.triangles, direct.triangles);
-  ASSERT_GE(done.size(), 2u);
-  EXPECT_EQ(std::adjacent_find(done.begin(), done.end(), std::greater_equal<>()), done.end());
 }
 
 // An OBJ's vertex colors are optional per line. Out of core they ride when a vertex of the first chunk of

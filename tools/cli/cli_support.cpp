@@ -71,7 +71,8 @@ struct ProgressBar {
   // What the stages count (core/system.h leaves units to the phase): readers and the cluster pass report
   // bytes of input, the decimator collapses, writers faces.
   static const char* unit(std::string_view phase) {
-    if (phase == "read" || phase == "cluster: faces" || phase.starts_with("dereference")) return "B";
+    if (phase.starts_with("read") || phase == "cluster: faces" || phase.starts_with("dereference"))
+      return "B";
     if (phase == "decimate") return " collapses";
     if (phase == "write" || phase == "generate") return " faces";
     return "";
