@@ -283,6 +283,12 @@ VertexPlan plan_vertices(const std::string& path, const PlyElement& element) {
 // ---- The stream
 // ---------------------------------------------------------------------------------------------
 
+// The face element's list of corners, under either of its usual names.
+std::optional<std::size_t> index_list(const PlyElement& faces) {
+  const auto list = faces.find("vertex_indices");
+  return list ? list : faces.find("vertex_index");
+}
+
 // A face element's count is only a hint: bound it by what the data could hold at the smallest record, so
 // no one plans for the 10^15 faces a header may claim.
 std::uint64_t bounded_face_count(const PlyElement& faces, const PlyProperty& index, bool ascii,
@@ -496,8 +502,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
   }
   face_element_ = *face;
   const PlyElement& face_element = header_.elements[face_element_];
-  auto list = face_element.find("vertex_indices");
-  if (!list) list = face_element.find("vertex_index");
+  const auto list = index_list(face_element);
   if (!list) {
     throw Error(path, FilePosition::line(face_element.header_line),
                 "element " + face_element.name + " has no vertex_indices list");
@@ -1374,8 +1379,7 @@ std::uint64_t ply_triangles_hint(const std::string& path) {
   const PlyHeader header = parse_ply_header(reader);
   for (const PlyElement& element : header.elements) {
     if (element.name != "face") continue;
-    auto index = element.find("vertex_indices");
-    if (!index) index = element.find("vertex_index");
+    const auto index = index_list(element);
     if (!index || !element.properties[*index].is_list) return 0;
     return bounded_face_count(element, element.properties[*index], header.encoding == PlyEncoding::ascii,
                               reader.file_size() - header.data_offset);

@@ -27,7 +27,6 @@ struct ProgressBar {
   void update(std::string_view new_phase, std::uint64_t done, std::uint64_t total) {
     if (new_phase.empty()) {  // make_warning's call: a line of its own for the warning
       finish_line();
-      phase.clear();
       return;
     }
     const auto now = Clock::now();
