@@ -16,6 +16,7 @@
 #include <cstring>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "ocsimp/core/big_vector.h"
 #include "ocsimp/core/error.h"
@@ -27,11 +28,62 @@ int worker_threads(int requested) {
   return requested > 0 ? std::min(requested, cores) : cores;
 }
 
+namespace {
+
+// The limit in a control group's memory file, 0 for none ("max", or v1's page-rounded 2^63).
+std::uint64_t limit_in(const std::string& file) {
+  std::ifstream in(file);
+  std::string text;
+  if (!(in >> text) || text.empty() || !std::isdigit(static_cast<unsigned char>(text[0]))) return 0;
+  const std::uint64_t bytes = std::strtoull(text.c_str(), nullptr, 10);
+  return bytes < (std::uint64_t{1} << 60) ? bytes : 0;
+}
+
+}  // namespace
+
+std::uint64_t control_group_memory_limit() {
+  // The groups this process is in (/proc/self/cgroup: "0::/path" for v2, "N:...memory...:/path" for v1), and
+  // every group above them, whose limits apply too. A container usually sees its own group as the root.
+  std::vector<std::string> files;
+  std::ifstream groups("/proc/self/cgroup");
+  std::string line;
+  while (std::getline(groups, line)) {
+    const std::size_t first = line.find(':'), second = line.find(':', first + 1);
+    if (first == std::string::npos || second == std::string::npos) continue;
+    const std::string controllers = line.substr(first + 1, second - first - 1);
+    std::string path = line.substr(second + 1);
+    std::vector<std::string> roots;
+    std::string file;
+    if (controllers.empty()) {
+      roots = {"/sys/fs/cgroup", "/sys/fs/cgroup/unified"};
+      file = "/memory.max";
+    } else if (("," + controllers + ",").find(",memory,") != std::string::npos) {
+      roots = {"/sys/fs/cgroup/memory"};
+      file = "/memory.limit_in_bytes";
+    } else {
+      continue;
+    }
+    while (true) {
+      for (const std::string& root : roots) files.push_back(root + (path == "/" ? "" : path) + file);
+      if (path.empty() || path == "/") break;
+      path = path.substr(0, std::max<std::size_t>(path.rfind('/'), 1));
+    }
+  }
+  std::uint64_t limit = 0;
+  for (const std::string& file : files) {
+    const std::uint64_t bytes = limit_in(file);
+    if (bytes > 0) limit = limit == 0 ? bytes : std::min(limit, bytes);
+  }
+  return limit;
+}
+
 std::uint64_t physical_memory_bytes() {
   const long pages = sysconf(_SC_PHYS_PAGES);
   const long page_size = sysconf(_SC_PAGE_SIZE);
   if (pages <= 0 || page_size <= 0) return 0;
-  return static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page_size);
+  const std::uint64_t physical = static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page_size);
+  const std::uint64_t group = control_group_memory_limit();
+  return group > 0 ? std::min(physical, group) : physical;
 }
 
 namespace {

@@ -1,6 +1,7 @@
 #include "ocsimp/core/system.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include "ocsimp/core/error.h"
 
@@ -19,6 +20,12 @@ TEST(System, ParsesByteSizes) {
 
 TEST(System, ReportsMemory) {
   EXPECT_GT(physical_memory_bytes(), 0u);
+  // Never more than the machine has, nor than a control group allows.
+  EXPECT_LE(physical_memory_bytes(), static_cast<std::uint64_t>(sysconf(_SC_PHYS_PAGES)) *
+                                         static_cast<std::uint64_t>(sysconf(_SC_PAGE_SIZE)));
+  if (control_group_memory_limit() > 0) {
+    EXPECT_LE(physical_memory_bytes(), control_group_memory_limit());
+  }
   EXPECT_GT(peak_rss_bytes(), 0u);
   EXPECT_GE(peak_rss_bytes(), current_rss_bytes() / 2);
 }

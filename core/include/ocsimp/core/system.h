@@ -8,7 +8,13 @@
 
 namespace ocsimp {
 
+// The memory this process can have: the machine's physical memory, or less where its control group (a
+// container's memory limit) allows less. A third of it is the default --memory-limit, which in a container
+// of 8 GB on a 64 GB host would otherwise be 21 GB.
 std::uint64_t physical_memory_bytes();
+// A control group's memory limit in bytes (cgroup v2 memory.max, or v1 memory.limit_in_bytes, as a container
+// sees its own group); 0 when there is none.
+std::uint64_t control_group_memory_limit();
 
 // The threads a parallel stage runs on when asked for `requested` (0 or less: all cores): never more than
 // the cores. Outputs never depend on it; more threads than cores only share them, and a thousand of them
