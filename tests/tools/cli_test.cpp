@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "ocsimp/core/system.h"
 #include "ocsimp/streaming/io.h"
 #include "test_support.h"
 
@@ -604,6 +605,44 @@ TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) 
   // Its vertex colors ride with the positions, as a PLY's do.
   ASSERT_EQ(from_obj_mesh.colors.size(), from_obj_mesh.positions.size());
   EXPECT_LT(attribute_fit(from_obj_mesh).color_error, reference.color_error + 5) << reference.color_error;
+}
+
+// A command that holds whole meshes refuses at once a PLY whose header announces more faces than it could
+// hold in this process's memory, rather than reading it and being killed when memory runs out. The file is
+// sparse: a header, then zeros that take no disk space, as many as the announced faces need.
+TEST(Cli, CommandsHoldingWholeMeshesRefuseAnInputBeyondMemory) {
+  test::TempDir dir;
+  const std::string huge = dir / "huge.ply";
+  const std::uint64_t faces = physical_memory_bytes() / 16 + 1000;
+  const std::string header =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face " +
+      std::to_string(faces) + "\nproperty list uchar int vertex_indices\nend_header\n";
+  {
+    std::ofstream out(huge, std::ios::binary);
+    out << header;
+  }
+  std::filesystem::resize_file(huge, header.size() + 36 + 13 * faces);
+  const std::string bunny_like = dir / "small.ply";
+  write_mesh(bunny_like, test::sphere(2));
+  for (const std::string& command :
+       {"info " + huge, "decimate " + huge + " -o " + (dir / "out.ply") + " --ratio 0.1",
+        "convert " + huge + " " + (dir / "out.stl"), "compare " + huge + " " + bunny_like}) {
+    SCOPED_TRACE(command);
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("huge.ply: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(" in memory: about "), std::string::npos) << r.err;
+    // compare counts both meshes' faces.
+    const std::uint64_t counted =
+        command.starts_with("compare") ? faces + test::sphere(2).face_count() : faces;
+    EXPECT_NE(r.err.find(std::to_string(counted) + " faces, more than the "), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.ply"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.stl"));
+  // The same commands take a mesh that fits.
+  EXPECT_EQ(run("info " + bunny_like, dir).exit_code, 0);
 }
 
 // A memory limit below what clustering to the target needs cannot be kept: the target comes first (reached,

@@ -239,6 +239,25 @@ void check_report_destination(const std::string& report, const std::vector<std::
   }
 }
 
+void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_per_face,
+                           const std::string& holding, const std::string& instead) {
+  std::uint64_t faces = 0;
+  for (const std::string& path : paths) {
+    try {
+      if (detect_format(path) == FileFormat::ply) faces += triangles_hint(path);
+    } catch (const Error&) {
+      // The reader reports it.
+    }
+  }
+  const std::uint64_t memory = physical_memory_bytes();
+  const double needed = bytes_per_face * static_cast<double>(faces);
+  if (memory == 0 || needed <= static_cast<double>(memory)) return;
+  throw Error(paths.front(), {},
+              holding + " in memory: about " + format_bytes(static_cast<std::uint64_t>(needed)) + " for " +
+                  std::to_string(faces) + " faces, more than the " + format_bytes(memory) +
+                  " this process can have" + (instead.empty() ? "" : "; " + instead));
+}
+
 WarningFn make_warning(const std::string& input, const ProgressFn& progress) {
   return [input, progress](const std::string& message) {
     if (progress) progress("", 0, 0);

@@ -66,6 +66,15 @@ FileFormat check_mesh_destination(const std::string& path);
 // JSON would replace the result, or the input itself.
 void check_report_destination(const std::string& report, const std::vector<std::string>& meshes);
 
+// Refuses, before anything is read, an input that a command holding whole meshes in memory could not hold:
+// `bytes_per_face` (a floor under the command's measured peak) times the faces the PLY headers of `paths`
+// announce, over the memory this process can have (physical_memory_bytes). The system would otherwise end
+// the process when its memory ran out, after the reading, without a word. `holding` says what the command
+// holds ("decimate holds the whole mesh"), `instead` what takes such an input (may be empty). Other formats
+// announce no count to go by, and are left to run.
+void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_per_face,
+                           const std::string& holding, const std::string& instead);
+
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
 

@@ -64,6 +64,9 @@ void add_compare_command(CLI::App& app) {
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
     if (!flags->report.empty()) check_report_destination(flags->report, {flags->original, flags->simplified});
+    // 140 bytes a face of the original at peak on gen 4 M (its mesh and search index).
+    check_whole_mesh_fits({flags->original, flags->simplified}, 125,
+                          "compare holds each mesh and its search index", "");
     const auto limit = limit_threads(flags->threads);
     const ProgressFn progress = make_progress(flags->quiet);
     CompareOptions options = flags->options;

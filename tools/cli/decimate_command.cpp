@@ -80,6 +80,9 @@ void add_decimate_command(CLI::App& app) {
     const ProgressFn progress = make_progress(flags->quiet);
     options.progress = progress;
 
+    // 144 bytes a face at peak on gen 4 M.
+    check_whole_mesh_fits({flags->input}, 130, "decimate holds the whole mesh and its edges",
+                          "ocsimp simplify takes any size within --memory-limit, clustering first");
     ReadOptions read;
     read.progress = progress;
     QuadricMesh input;
