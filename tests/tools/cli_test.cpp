@@ -19,6 +19,7 @@
 
 #include "ocsimp/core/system.h"
 #include "ocsimp/streaming/io.h"
+#include "ocsimp/tools/compare.h"
 #include "test_support.h"
 
 namespace ocsimp {
@@ -605,6 +606,34 @@ TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) 
   // Its vertex colors ride with the positions, as a PLY's do.
   ASSERT_EQ(from_obj_mesh.colors.size(), from_obj_mesh.positions.size());
   EXPECT_LT(attribute_fit(from_obj_mesh).color_error, reference.color_error + 5) << reference.color_error;
+}
+
+// cluster holds its input's vertex array only up to --memory-limit (a third of RAM by default); past it the
+// faces are dereferenced on disk and clustered as soups, to the same cells: same counts, the colors kept,
+// and distances to the original within a hair of the in-core run's.
+TEST(Cli, ClusterDereferencesAVertexArrayOverItsMemoryLimit) {
+  test::TempDir dir;
+  const std::string mesh = dir / "scan.ply", report = dir / "report.json";
+  ASSERT_EQ(run("gen -q --triangles 100000 --seed 3 --colors -o " + mesh, dir).exit_code, 0);  // 600 kB
+  std::vector<IndexedMesh> outputs;
+  for (const std::string limit : {"", " --memory-limit 100K"}) {
+    SCOPED_TRACE(limit);
+    const std::string out = dir / ("out" + std::to_string(outputs.size()) + ".ply");
+    const CommandResult r =
+        run("cluster -q --grid 32 " + mesh + " -o " + out + limit + " --report " + report, dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.err, "");
+    EXPECT_EQ(nlohmann::json::parse(file_bytes(report))["out_of_core"].get<bool>(), !limit.empty());
+    outputs.push_back(read_mesh(out));
+    EXPECT_EQ(outputs.back().colors.size(), outputs.back().positions.size());
+  }
+  EXPECT_EQ(outputs[1].face_count(), outputs[0].face_count());
+  EXPECT_EQ(outputs[1].vertex_count(), outputs[0].vertex_count());
+  const IndexedMesh original = read_mesh(mesh);
+  CompareOptions compare;
+  compare.samples = 100'000;
+  const double in_core = measure_distance(original, outputs[0], compare).rms;
+  EXPECT_NEAR(measure_distance(original, outputs[1], compare).rms, in_core, 0.01 * in_core);
 }
 
 // A command that holds whole meshes refuses at once a PLY whose header announces more faces than it could

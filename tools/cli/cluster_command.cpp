@@ -21,6 +21,7 @@ void add_cluster_command(CLI::App& app) {
     std::uint64_t faces = 0, vertices = 0;
     std::string representative = "quadric";
     bool no_boundary = false;
+    std::string memory_limit;
     bool ascii = false;
     bool quiet = false;
   };
@@ -54,6 +55,10 @@ void add_cluster_command(CLI::App& app) {
                   "Weight of a border crossing against a cell's worth of surface")
       ->capture_default_str()
       ->check(non_negative_number());
+  cmd->add_option("--memory-limit", flags->memory_limit,
+                  "Bytes the input's vertex array may take, e.g. 2G (default: a third of RAM); a larger one "
+                  "is dereferenced on disk under TMPDIR and its faces clustered as triangle soups")
+      ->check(byte_size());
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
@@ -81,7 +86,12 @@ void add_cluster_command(CLI::App& app) {
 
     ReadOptions read;
     read.progress = progress;
+    read.memory_budget =
+        effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit));
     std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);
+    const bool out_of_core = dereferenced_out_of_core(*stream);
+    if (!stream->attributes_left_out().empty())
+      make_warning(flags->input, progress)(attributes_left_out_warning(stream->attributes_left_out()));
     const double open_seconds = seconds_since(start);
     ClusterStats stats;
     const QuadricMesh result = cluster(*stream, options, &stats);
@@ -129,6 +139,7 @@ void add_cluster_command(CLI::App& app) {
                              {"repeated_fine_cells", stats.duplicate_triangles},
                              {"out", stats.output_faces}};
       report["target_met"] = stats.target_met;
+      report["out_of_core"] = out_of_core;
       report["seconds"] = {{"open", open_seconds},
                            {"cluster", stats.seconds},
                            {"write", write_seconds},

@@ -60,7 +60,8 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option(
          "--memory-limit", flags->memory_limit,
          "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
-         "fit what clustering leaves of it (at least half) is dereferenced on disk under TMPDIR")
+         "fit beside the clustering is dereferenced on disk under TMPDIR when that takes less memory (a "
+         "target far below the input)")
       ->check(byte_size());
   cmd->add_flag("--two-stage", o.two_stage,
                 "Cluster first even when the input fits in core (an input no larger than the intermediate is "

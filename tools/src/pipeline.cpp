@@ -155,12 +155,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const double fine_per_vertex = options.cluster.fine_cells_per_target;
   stage.out_of_core = dereferenced_out_of_core(*stream);
   stage.attributes_left_out = stream->attributes_left_out();
-  if (!stage.attributes_left_out.empty() && options.warn) {
-    options.warn("its " + stage.attributes_left_out +
-                 " are not in the output: past the memory limit an OBJ's faces are read from disk with their "
-                 "positions, and with vertex colors when its first 65,536 vertices have some; normals and "
-                 "texture coordinates, which it indexes per corner, are left out (a PLY keeps them all)");
-  }
+  if (!stage.attributes_left_out.empty() && options.warn)
+    options.warn(attributes_left_out_warning(stage.attributes_left_out));
   // The vertex array held through the clustering pass: positions and whatever attributes the reader kept.
   const IndexedMesh& held = stream->vertices();
   const double vertex_bytes = static_cast<double>(
@@ -362,6 +358,13 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
 }
 
 }  // namespace
+
+std::string attributes_left_out_warning(const std::string& left_out) {
+  return "its " + left_out +
+         " are not in the output: past the memory limit an OBJ's faces are read from disk with their "
+         "positions, and with vertex colors when its first 65,536 vertices have some; normals and texture "
+         "coordinates, which it indexes per corner, are left out (a PLY keeps them all)";
+}
 
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
   return memory_limit > 0 ? memory_limit : physical_memory_bytes() / 3;

@@ -62,6 +62,10 @@ struct SimplifyOptions {
   WarningFn warn;
 };
 
+// The warning that an input read out of core left out its `left_out` attributes
+// (TriangleStream::attributes_left_out), and why.
+std::string attributes_left_out_warning(const std::string& left_out);
+
 // The memory budget in force for `memory_limit` (0: a third of physical memory).
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit);
 
