@@ -65,8 +65,9 @@ std::uint64_t control_group_memory_limit() {
     }
     while (true) {
       for (const std::string& root : roots) files.push_back(root + (path == "/" ? "" : path) + file);
-      if (path.empty() || path == "/") break;
-      path = path.substr(0, std::max<std::size_t>(path.rfind('/'), 1));
+      const std::size_t slash = path.rfind('/');
+      if (path == "/" || slash == std::string::npos) break;
+      path = path.substr(0, std::max<std::size_t>(slash, 1));
     }
   }
   std::uint64_t limit = 0;
