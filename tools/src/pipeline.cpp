@@ -83,6 +83,18 @@ double min_fine_per_vertex(bool soup) {
 
 using Clock = std::chrono::steady_clock;
 
+// The face count the options ask for of an input of `faces` faces: the face target, or the ratio of them (at
+// least 1), whichever is smaller; 0 without a count target, or with only a ratio of an unknown (0) count.
+std::uint64_t count_target(const SimplifyOptions& options, std::uint64_t faces) {
+  std::uint64_t target = options.target_faces;
+  if (options.target_ratio > 0 && faces > 0) {
+    const auto by_ratio = std::max<std::uint64_t>(
+        1, static_cast<std::uint64_t>(std::llround(options.target_ratio * static_cast<double>(faces))));
+    target = target > 0 ? std::min(target, by_ratio) : by_ratio;
+  }
+  return target;
+}
+
 // The bytes of vertex array the input may hold in core (ReadOptions::memory_budget); past them its faces are
 // dereferenced on disk and clustered as a triangle soup. It may hold what the indexed clustering's full plan
 // for twice the target leaves of the budget (at least half of it), and more while the indexed pass at its
@@ -93,12 +105,7 @@ using Clock = std::chrono::steady_clock;
 // under 200M: 409 MiB out of core, 179 MiB in core). For a ratio the target comes from the file's announced
 // count; without a count target, half the budget.
 std::uint64_t vertex_allowance(const std::string& input_path, const SimplifyOptions& options, double budget) {
-  std::uint64_t target = options.target_faces;
-  if (options.target_ratio > 0) {
-    const auto by_ratio = static_cast<std::uint64_t>(
-        std::llround(options.target_ratio * static_cast<double>(triangles_hint(input_path))));
-    if (by_ratio > 0) target = target > 0 ? std::min(target, by_ratio) : by_ratio;
-  }
+  const std::uint64_t target = count_target(options, triangles_hint(input_path));
   double allowance = budget / 2;
   if (target > 0) {
     const double fine_per_vertex = options.cluster.fine_cells_per_target;
@@ -167,13 +174,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   stage.input_faces = faces_hint;
   stage.phases.push_back({"open", seconds_since(start), 0, 0, peak_rss_bytes()});
 
-  std::uint64_t target = options.target_faces;
-  if (options.target_ratio > 0) {
-    const auto by_ratio =
-        static_cast<std::uint64_t>(std::llround(options.target_ratio * static_cast<double>(faces_hint)));
-    target = target > 0 ? std::min(target, std::max<std::uint64_t>(by_ratio, 1))
-                        : std::max<std::uint64_t>(by_ratio, 1);
-  }
+  const std::uint64_t target = count_target(options, faces_hint);
 
   // Intermediate size: a few times the target, as large as both stages' memory allows.
   // The largest intermediate whose fine cells fit beside the vertex array: fine_cells_for is the full
@@ -281,12 +282,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   stage.intermediate_faces = stage.mesh.mesh.face_count();
   stage.phases.push_back(
       {"cluster", seconds_since(start), stage.input_faces, stage.intermediate_faces, peak_rss_bytes()});
-  if (options.target_ratio > 0) {
-    target = std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::llround(
-                                            options.target_ratio * static_cast<double>(stage.input_faces))));
-    if (options.target_faces > 0) target = std::min(target, options.target_faces);
-  }
-  stage.target_faces = target;
+  stage.target_faces = count_target(options, stage.input_faces);
   stage.target_ratio = 0;
   return stage;
 }
