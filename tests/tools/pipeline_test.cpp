@@ -359,6 +359,29 @@ TEST(Pipeline, WarnsOfAMemoryPlanOverTheLimitBeforeClustering) {
   }
 }
 
+TEST(Pipeline, AMemoryLimitGivesTheSameBytesWhateverTheThreadsAndTheRun) {
+  // Under a limit that squeezes the clustering plan (fewer fine cells than the full count), the plan must
+  // come from the input and the options alone: the process's own memory grows from one run to the next and
+  // with the threads, and a plan that counted it gave different meshes for the same command.
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 60'000, 2);
+  SimplifyOptions options;
+  options.target_faces = 3'000;
+  options.two_stage = true;
+  options.memory_limit = 200u << 20;
+  std::vector<IndexedMesh> results;
+  for (const int threads : {1, 2, 1, 3}) {
+    options.threads = threads;
+    results.push_back(simplify(path, options).mesh);
+    EXPECT_EQ(results.back().face_count(), 3'000u);
+  }
+  for (std::size_t i = 1; i < results.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(results[i].positions, results[0].positions);
+    EXPECT_EQ(results[i].triangles, results[0].triangles);
+  }
+}
+
 TEST(Pipeline, TwoStageReachesTheTargetOnPartsFarApart) {
   // Two small scans 5,000 diagonals apart: the box is almost empty, and the octree's fine grid, capped for
   // speed and sized for the box, was refined only until its cells neared a quarter of the vertices. The

@@ -43,6 +43,10 @@ constexpr double kLevelMargin = 2.0;
 // they outgrow twice the plan, which leaves up to twice the planned number, as the indexed pass's level
 // choice does.
 constexpr double kSoupClusterBytesPerCell = 1800.0;
+// What the process holds before it reads anything (code, libraries, thread pools; about 9 MB measured here)
+// as the plan counts it: a constant, as the plan and so the output must not depend on the run (the measured
+// size grows from one run to the next in a process, and with the threads).
+constexpr double kProcessBytes = 16 << 20;
 constexpr double kMaxIntermediate = 8.0;
 // The clustering stage stops at the largest face count it reaches not above its own target, often a few short
 // of it: an intermediate a quarter over the final target leaves the decimator the slack to meet it exactly
@@ -188,7 +192,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // The indexed pass holds the vertex array beside its accumulating cells only, and releases it before the
   // merge state grows; a soup's buffers stay beside all of it. Both beside the process itself.
   const double pass_bytes = pass_bytes_per_cell(held.has_normals(), held.has_colors(), held.has_uvs());
-  const double free_bytes = std::max(0.0, budget - process_bytes);
+  const double free_bytes = std::max(0.0, budget - kProcessBytes);
   const double cell_room =
       soup ? std::max(0.0, free_bytes - held_bytes) / (kLevelMargin * cell_bytes)
            : std::min(std::max(0.0, free_bytes - vertex_bytes) / (kLevelMargin * pass_bytes),
