@@ -25,10 +25,6 @@ struct ProgressBar {
   bool line_open = false;
 
   void update(std::string_view new_phase, std::uint64_t done, std::uint64_t total) {
-    if (new_phase.empty()) {  // make_warning's call: a line of its own for the warning
-      finish_line();
-      return;
-    }
     const auto now = Clock::now();
     if (new_phase != phase) {
       finish_line();
@@ -155,11 +151,22 @@ CLI::Validator thread_count() {
 }
 
 ProgressFn make_progress(bool quiet) {
-  if (quiet || !::isatty(STDERR_FILENO)) return {};
-  auto bar = std::make_shared<ProgressBar>();
-  return [bar](std::string_view phase, std::uint64_t done, std::uint64_t total) {
-    bar->update(phase, done, total);
+  return make_console(quiet, "").progress;
+}
+
+Console make_console(bool quiet, const std::string& input) {
+  Console console;
+  auto bar = (quiet || !::isatty(STDERR_FILENO)) ? nullptr : std::make_shared<ProgressBar>();
+  if (bar) {
+    console.progress = [bar](std::string_view phase, std::uint64_t done, std::uint64_t total) {
+      bar->update(phase, done, total);
+    };
+  }
+  console.warn = [bar, input](const std::string& message) {
+    if (bar) bar->finish_line();
+    std::fprintf(stderr, "ocsimp: warning: %s: %s\n", input.c_str(), message.c_str());
   };
+  return console;
 }
 
 std::unique_ptr<tbb::global_control> limit_threads(int threads) {
@@ -256,13 +263,6 @@ void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_p
               holding + " in memory: about " + format_bytes(static_cast<std::uint64_t>(needed)) + " for " +
                   std::to_string(faces) + " faces, more than the " + format_bytes(memory) +
                   " this process can have" + (instead.empty() ? "" : "; " + instead));
-}
-
-WarningFn make_warning(const std::string& input, const ProgressFn& progress) {
-  return [input, progress](const std::string& message) {
-    if (progress) progress("", 0, 0);
-    std::fprintf(stderr, "ocsimp: warning: %s: %s\n", input.c_str(), message.c_str());
-  };
 }
 
 void write_json_report(const std::string& path, const nlohmann::json& report) {

@@ -81,7 +81,8 @@ void add_cluster_command(CLI::App& app) {
       throw Error("--octree needs --vertices N or --faces N");
     }
     const auto limit = limit_threads(static_cast<int>(options.threads));
-    const ProgressFn progress = make_progress(flags->quiet);
+    const Console console = make_console(flags->quiet, flags->input);
+    const ProgressFn& progress = console.progress;
     options.progress = progress;
 
     ReadOptions read;
@@ -91,7 +92,7 @@ void add_cluster_command(CLI::App& app) {
     std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);
     const bool out_of_core = dereferenced_out_of_core(*stream);
     if (!stream->attributes_left_out().empty())
-      make_warning(flags->input, progress)(attributes_left_out_warning(stream->attributes_left_out()));
+      console.warn(attributes_left_out_warning(stream->attributes_left_out()));
     const double open_seconds = seconds_since(start);
     ClusterStats stats;
     const QuadricMesh result = cluster(*stream, options, &stats);

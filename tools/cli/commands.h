@@ -47,6 +47,13 @@ CLI::Validator byte_size();
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.
 ProgressFn make_progress(bool quiet);
+// That progress callback, and the warnings of a command on `input` (SimplifyOptions::warn): printed on
+// stderr as they come, even with --quiet, naming `input`, on a line of their own below the bar.
+struct Console {
+  ProgressFn progress;
+  WarningFn warn;
+};
+Console make_console(bool quiet, const std::string& input);
 
 // Writes a simplified mesh to `path` (atomically, as write_mesh does), and warns on stderr, even with
 // --quiet, when it has no faces: every triangle collapsed, as on an input too thin for the resolution or with
@@ -77,10 +84,6 @@ void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_p
 
 // Writes `report` as pretty JSON to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
-
-// Prints a pipeline's warnings (SimplifyOptions::warn) on stderr as they come, even with --quiet, naming
-// `input`, on a line of their own below a progress bar drawn by `progress`.
-WarningFn make_warning(const std::string& input, const ProgressFn& progress);
 
 double seconds_since(std::chrono::steady_clock::time_point start);
 

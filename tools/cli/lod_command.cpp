@@ -105,9 +105,10 @@ void add_lod_command(CLI::App& app) {
     }
     if (!flags->report.empty()) check_report_destination(flags->report, meshes);
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
-    const ProgressFn progress = make_progress(flags->quiet);
+    const Console console = make_console(flags->quiet, flags->input);
+    const ProgressFn& progress = console.progress;
     options.progress = progress;
-    options.warn = make_warning(flags->input, progress);
+    options.warn = console.warn;
     std::vector<std::string> files;
     std::vector<std::size_t> vertices;
     WriteOptions write;

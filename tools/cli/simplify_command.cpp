@@ -88,9 +88,10 @@ void add_simplify_command(CLI::App& app) {
     check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
-    const ProgressFn progress = make_progress(flags->quiet);
+    const Console console = make_console(flags->quiet, flags->input);
+    const ProgressFn& progress = console.progress;
     options.progress = progress;
-    options.warn = make_warning(flags->input, progress);
+    options.warn = console.warn;
     const auto start = std::chrono::steady_clock::now();
     SimplifyResult result = simplify(flags->input, options);
     const auto write_start = std::chrono::steady_clock::now();
