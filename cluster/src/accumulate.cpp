@@ -52,6 +52,9 @@ namespace {
 // ---- Packed vertices -------------------------------------------------------------------------------------
 
 constexpr double kQuantum = static_cast<double>(1u << 21);
+// A quantum's PointBox bin: its top 8 of 21 bits.
+constexpr int kQuantumBinShift = 21 - 8;
+static_assert(kPointBoxBins == 1 << (21 - kQuantumBinShift));
 constexpr std::uint64_t kQuantumMax = (1u << 21) - 1;
 static_assert(sizeof(Vec3f) == 12, "packed vertices reuse a position's 12 bytes");
 
@@ -220,6 +223,7 @@ struct CellStore {
   std::vector<ExactSums> exact;        // empty but in soup passes: an indexed pass keeps them sparse
   ZeroedVector<std::uint32_t> points;
   ZeroedVector<Vec3f> point_sum;
+  ZeroedVector<PointBox> point_box;
 
   // Marks the cell as touched by a triangle, after its contribution is added. A touched cell's quadric has a
   // positive trace (every proper triangle adds its area to it); one touched only by zero-area triangles
@@ -251,6 +255,7 @@ struct CellStore {
     exact.emplace_back();
     points.push_back(0);
     point_sum.emplace_back(Vec3f::Zero());
+    point_box.push_back(PointBox{});
   }
   // Hands the sums over to `cells`, but for the border sums.
   void move_into(FineCells& cells) {
@@ -265,6 +270,7 @@ struct CellStore {
     quadrics = {};
     cells.points = std::move(points);
     cells.point_sum = std::move(point_sum);
+    cells.point_box = std::move(point_box);
   }
 };
 
@@ -934,6 +940,7 @@ struct PointChunk {
   ChunkTable<std::uint32_t> table;
   std::vector<std::uint32_t> points;
   std::vector<Vec3f> point_sum;
+  std::vector<PointBox> point_box;
   AttributeSums attributes;
 
   std::uint32_t slot(std::uint32_t cell) {
@@ -942,6 +949,7 @@ struct PointChunk {
     if (inserted) {
       points.push_back(0);
       point_sum.emplace_back(Vec3f::Zero());
+      point_box.push_back(PointBox{});
       attributes.push_back();
     }
     return s;
@@ -950,6 +958,7 @@ struct PointChunk {
     table.clear();
     points.clear();
     point_sum.clear();
+    point_box.clear();
     attributes.clear();
   }
   void sort_by_cell() { table.sort_by_cell(); }
@@ -1256,6 +1265,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
   CellStore<std::int16_t>& sums = store;
   sums.points.resize(count);  // zeros that take memory only as they are written
   sums.point_sum.resize(count);
+  sums.point_box.resize(count);
   const bool normals = vertices.normals.size() == vertex_count;
   const bool colors = vertices.colors.size() == vertex_count;
   const bool uvs = vertices.uvs.size() == vertex_count;
@@ -1298,6 +1308,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
             sx = sum.x(), sy = sum.y(), sz = sum.z();
           }
           ++count_in_run;
+          for (int a = 0; a < 3; ++a)
+            add_bin(chunk.point_box[s], a, static_cast<std::uint32_t>(quantum(q, a) >> kQuantumBinShift));
           // An offset in quanta is exact in float, and so is its scaling: the bits of dequantize()'s value
           // rounded to float.
           sx += static_cast<float>(quantum(q, 0)) * static_cast<float>(1.0 / kQuantum);
@@ -1317,6 +1329,8 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         const std::uint32_t s = chunk.slot(cell);
         ++chunk.points[s];
         chunk.point_sum[s] += dequantize(q).cast<float>();
+        for (int a = 0; a < 3; ++a)
+          add_bin(chunk.point_box[s], a, static_cast<std::uint32_t>(quantum(q, a) >> kQuantumBinShift));
         chunk.attributes.add_vertex(s, vertices, v);
       }
       chunk.sort_by_cell();
@@ -1328,6 +1342,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
                      sums.points[cell] += chunk.points[s];
                      sums.point_sum[cell] += chunk.point_sum[s];
                    }
+                   merge_box(sums.point_box[cell], chunk.point_box[s]);
                    chunk.attributes.add_to(cells, cell, s);
                  });
     // These vertices are done with: hand their pages back now rather than when the whole array goes, so that
@@ -1364,6 +1379,7 @@ struct SoupChunk {
   std::vector<CellRecord> records;
   std::vector<std::uint32_t> points;
   std::vector<Vec3f> point_sum;
+  std::vector<PointBox> point_box;
   AttributeSums attributes;
   std::vector<CellTriple<CellKey>> survivors;
 
@@ -1374,6 +1390,7 @@ struct SoupChunk {
       records.emplace_back();
       points.push_back(0);
       point_sum.emplace_back(Vec3f::Zero());
+      point_box.push_back(PointBox{});
       attributes.push_back();
     }
     return s;
@@ -1385,6 +1402,7 @@ struct SoupChunk {
     records.clear();
     points.clear();
     point_sum.clear();
+    point_box.clear();
     attributes.clear();
     survivors.clear();
   }
@@ -1413,9 +1431,10 @@ struct SoupCells {
   // Adds partial sums to cell i, its attributes' from entry j of `from`; `touched`: some triangle touched the
   // part.
   void add(std::uint32_t i, const CellRecord& part, bool touched, std::uint32_t points,
-           const Vec3f& point_sum, const AttributeSums& from, std::uint32_t j) {
+           const Vec3f& point_sum, const PointBox& point_box, const AttributeSums& from, std::uint32_t j) {
     store.add(i, part);
     if (touched) store.touch(i);
+    merge_box(store.point_box[i], point_box);
     // A cell's means stay those of the points counted, should its count ever saturate.
     if (store.points[i] <= std::numeric_limits<std::uint32_t>::max() - points) {
       store.points[i] += points;
@@ -1460,10 +1479,20 @@ void coarsen_soup(Grid& grid, SoupCells& cells, TripleSet<CellKey>& survivors) {
     }
     part.set_border(exact, crease);
     const std::uint32_t points = cells.store.points[i];
+    // A bin b of the child is bin (b + 256 offset) / 2 of the parent, rounded down at both ends: outward.
+    const PointBox& box = cells.store.point_box[i];
+    PointBox parent_box{};
+    if (!box_empty(box)) {
+      for (int a = 0; a < 3; ++a) {
+        const std::uint32_t shift = (c[a] & 1) * 256;
+        add_bin(parent_box, a, (255u - box[a] + shift) / 2);
+        add_bin(parent_box, a, (box[a + 3] + shift) / 2);
+      }
+    }
     parents.add(parents.number(parent_key(cells.keys[i])), part,
                 CellStore<std::int32_t>::touched(part.quadric), points,
-                0.5f * (cells.store.point_sum[i] + static_cast<float>(points) * offset), cells.attributes,
-                static_cast<std::uint32_t>(i));
+                0.5f * (cells.store.point_sum[i] + static_cast<float>(points) * offset), parent_box,
+                cells.attributes, static_cast<std::uint32_t>(i));
   }
   std::vector<CellTriple<CellKey>> triples;
   survivors.drain_into(triples);
@@ -1575,6 +1604,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
           f.index[k] = s;
           ++chunk.points[s];
           chunk.point_sum[s] += local.cast<float>();
+          add_local(chunk.point_box[s], local);
           chunk.attributes.add_corner(s, batch, i, k);
           for (int a = 0; a < 3; ++a) f.p[k][a] = p[a], f.local[k][a] = local[a];
         }
@@ -1593,7 +1623,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
       const std::vector<CellKey>& ids = chunk.table.ids();
       for (std::uint32_t s = 0; s < ids.size(); ++s) {
         seen.add(seen.number(ids[s]), chunk.records[s], true, chunk.points[s], chunk.point_sum[s],
-                 chunk.attributes, s);
+                 chunk.point_box[s], chunk.attributes, s);
       }
       for (const CellTriple<CellKey>& t : chunk.survivors) survivors.add(t);
       cells.surviving_instances += chunk.survivors.size();
@@ -1620,6 +1650,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   if (options.boundary) cells.border.resize(count);
   sorted.points.resize(count);
   sorted.point_sum.resize(count);
+  sorted.point_box.resize(count);
   const AttributeSums& attributes = seen.attributes;
   attributes.size_cells(cells, count);
   CellMap numbering(count);
@@ -1633,6 +1664,7 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
     }
     sorted.points[i] = store.points[from];
     sorted.point_sum[i] = store.point_sum[from];
+    sorted.point_box[i] = store.point_box[from];
     attributes.add_to(cells, static_cast<std::uint32_t>(i), from);
     bool inserted;
     numbering.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);

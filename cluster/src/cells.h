@@ -2,7 +2,9 @@
 // triangles of cells. Everything after the pass (merging, placing) works from this alone.
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <new>
@@ -42,6 +44,30 @@ struct BorderSums {
 };
 
 using CellTriangle = CellTriple<std::uint32_t>;
+
+// The box of a cell's points (vertices, or a soup's corners), in 256ths of the cell rounded outward:
+// placement keeps a quadric representative near the points it stands for (see quadric_reach). Bytes 0-2 hold
+// 255 minus the lowest bin on each axis and bytes 3-5 the highest, so that all zeros is the empty box and
+// boxes merge by a bytewise max, in any order, to the same bytes.
+using PointBox = std::array<std::uint8_t, 6>;
+inline constexpr double kPointBoxBins = 256.0;
+inline void merge_box(PointBox& to, const PointBox& from) {
+  for (int k = 0; k < 6; ++k) to[k] = std::max(to[k], from[k]);
+}
+// `bin`: floor(local * 256) of a point at cell coordinate `local` on `axis`, in 0..255.
+inline void add_bin(PointBox& to, int axis, std::uint32_t bin) {
+  to[axis] = std::max(to[axis], static_cast<std::uint8_t>(255 - bin));
+  to[axis + 3] = std::max(to[axis + 3], static_cast<std::uint8_t>(bin));
+}
+inline void add_local(PointBox& to, const Vec3d& local) {
+  for (int a = 0; a < 3; ++a) {
+    const double bin = std::floor(local[a] * kPointBoxBins);
+    add_bin(to, a, static_cast<std::uint32_t>(std::clamp(bin, 0.0, kPointBoxBins - 1)));
+  }
+}
+inline bool box_empty(const PointBox& b) {
+  return b[0] + b[3] < 255 || b[1] + b[4] < 255 || b[2] + b[5] < 255;
+}
 
 // Hands out zeroed memory (calloc) and leaves elements default-initialized, so that a large array of sums or
 // records only costs memory as its pages are first written - the pass needs that to stay within its budget
@@ -83,6 +109,7 @@ struct FineCells {
   std::vector<std::uint8_t> touched;   // 1 when some triangle has a corner in the cell
   ZeroedVector<std::uint32_t> points;  // vertices (indexed input) or triangle corners (soups) averaged in
   ZeroedVector<Vec3f> point_sum;       // their sum, in the cell's frame (cell units from its lower corner)
+  ZeroedVector<PointBox> point_box;    // their box
   std::vector<Vec3f> normal_sum;       // input normals summed; empty when the input has none
   std::vector<std::array<std::uint64_t, 4>> color_sum;  // empty when the input has no colors
   std::vector<Vec2d> uv_sum;                            // empty when the input has no uvs

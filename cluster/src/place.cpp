@@ -152,7 +152,18 @@ PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, doub
   s.corners = cells.input_vertices > 0 ? kCornersPerVertex * s.points : s.points;
   s.point_sum =
       s.points * cells.grid.cell_origin(key) + cells.grid.cell * cells.point_sum[cell].cast<double>();
-  s.box = cells.grid.cell_box(key);
+  const Box3 cell_box = cells.grid.cell_box(key);
+  s.box = Box3f::around(cell_box);
+  Box3 point_box = cell_box;
+  if (cell < cells.point_box.size() && !box_empty(cells.point_box[cell])) {
+    const PointBox& b = cells.point_box[cell];
+    const double bin = cells.grid.cell / kPointBoxBins;
+    for (int a = 0; a < 3; ++a) {
+      point_box.lo[a] = cell_box.lo[a] + bin * (255 - b[a]);
+      point_box.hi[a] = cell_box.lo[a] + bin * (b[a + 3] + 1);
+    }
+  }
+  s.point_box = Box3f::around(point_box);
   return s;
 }
 
@@ -197,8 +208,8 @@ Vec3d minimize_in_box(const Quadric& q, const Box3& box, const Vec3d& start) {
 }
 
 Box3 quadric_reach(const PlacementSums& sums) {
-  Box3 reach = sums.box;
-  const Vec3d size = sums.box.extent();
+  Box3 reach = sums.point_box.to_double();
+  const Vec3d size = sums.box.to_double().extent();
   const double edge = sums.edge_length();
   for (int a = 0; a < 3; ++a) {
     const double margin = std::min(edge, size[a]);
@@ -221,7 +232,7 @@ Placement place(const PlacementSums& sums, Representative representative) {
       break;
     }
     case Representative::constrained:
-      point = minimize_in_box(sums.quadric, sums.box, mean);
+      point = minimize_in_box(sums.quadric, sums.box.to_double(), mean);
       break;
   }
   return {point, std::max(0.0, sums.quadric.evaluate(point))};

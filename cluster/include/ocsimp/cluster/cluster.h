@@ -48,9 +48,9 @@ enum class Representative {
   // pseudo-inverse (Lindstrom 2000): directions the quadric does not constrain (along a flat cell, along a
   // cylinder's axis) stay at the mean instead of running off. The cutoff, at 1e-3 of the quadric's trace (the
   // sum of its eigenvalues), is smooth (Tikhonov damping) so that the point varies continuously with the
-  // sums. The quadric
-  // only knows the triangles touching the cell, so a solution outside the cell by more than their mean edge
-  // (at most the cell's size) is replaced by the quadric's best point within that grown box.
+  // sums. The quadric only knows the triangles touching the cell, so a solution farther than their mean
+  // edge (at most the cell's size) outside the box of the cell's vertices is replaced by the quadric's best
+  // point within that grown box: the tangent planes of a horn's tip cross above the tip.
   quadric,
   // The minimizer of the quadric over the cell's box (Lindstrom & Silva 2001): never leaves the cell.
   constrained,
