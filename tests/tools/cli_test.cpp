@@ -465,6 +465,37 @@ TEST(Cli, LodWritesEachLevelWithItsCountAndAReport) {
   EXPECT_EQ(report["phases"].back()["triangles_out"].get<std::uint64_t>(), 500u);
 }
 
+TEST(Cli, LodTakesItsLevelsAsRatiosOfTheFacesRead) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply";
+  ASSERT_EQ(run("gen -q --holes 2 --triangles 60000 -o " + scan, dir).exit_code, 0);
+  const std::uint64_t faces = read_mesh(scan).face_count();
+  const CommandResult r = run("lod " + scan + " -o '" + (dir / "lod_{faces}.ply") +
+                                  "' --ratios 0.01,0.1 --report " + (dir / "lod.json"),
+                              dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const double ratios[] = {0.1, 0.01};
+  const nlohmann::json report = nlohmann::json::parse(file_bytes(dir / "lod.json"));
+  ASSERT_EQ(report["levels"].size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto expected = static_cast<std::uint64_t>(std::llround(ratios[i] * static_cast<double>(faces)));
+    const std::string file = dir / ("lod_" + std::to_string(expected) + ".ply");
+    EXPECT_EQ(read_mesh(file).face_count(), expected);
+    const nlohmann::json& level = report["levels"][i];
+    EXPECT_EQ(level["target_faces"].get<std::uint64_t>(), expected);
+    EXPECT_EQ(level["target_ratio"].get<double>(), ratios[i]);
+    EXPECT_EQ(level["file"], file);
+  }
+  // One list or the other, of ratios in (0, 1]; each refusal one line, before any output.
+  for (const std::string levels : {"--faces 100 --ratios 0.1", "--ratios 0.1,1.5", "--ratios 0.1,x", ""}) {
+    const CommandResult bad = run("lod " + scan + " -o '" + (dir / "bad_{faces}.ply") + "' " + levels, dir);
+    EXPECT_EQ(bad.exit_code, 2) << levels;
+    EXPECT_EQ(lines(bad.err), 1u) << levels << ": " << bad.err;
+  }
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path))
+    EXPECT_EQ(entry.path().filename().string().rfind("bad_", 0), std::string::npos) << entry.path();
+}
+
 TEST(Cli, LodRefusesAPatternWithoutFacesForSeveralLevels) {
   test::TempDir dir;
   const std::string scan = dir / "scan.ply";

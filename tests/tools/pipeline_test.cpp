@@ -458,8 +458,9 @@ TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
   LodOptions options;
   options.level_faces = {500, 20'000, 3'001};
   std::vector<std::size_t> seen;
-  options.on_level = [&](std::size_t level, const IndexedMesh& mesh) {
+  options.on_level = [&](std::size_t level, std::uint64_t target_faces, const IndexedMesh& mesh) {
     EXPECT_EQ(level, seen.size());
+    EXPECT_EQ(target_faces, mesh.face_count());
     seen.push_back(mesh.face_count());
   };
   const LodResult result = lod(path, options);
@@ -484,6 +485,40 @@ TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
   const LodResult clustered = lod(path, options);
   EXPECT_TRUE(clustered.clustered);
   for (const LodLevel& level : clustered.levels) EXPECT_EQ(level.mesh.face_count(), level.target_faces);
+}
+
+// A ratio level counts the triangles actually read, which only the read (or the clustering pass) knows: an
+// OBJ says nothing of its face count up front, and its size suggests about a third of it here.
+TEST(Lod, RatiosResolveAgainstTheTrianglesRead) {
+  test::TempDir dir;
+  const IndexedMesh scan = read_mesh(write_scan(dir, 60'000, 2));
+  const std::string obj = dir / "scan.obj";
+  write_mesh(obj, scan);
+  const std::uint64_t faces = scan.face_count();
+  LodOptions options;
+  options.level_ratios = {0.01, 0.5, 0.1};
+  std::vector<std::uint64_t> named;
+  options.on_level = [&](std::size_t, std::uint64_t target_faces, const IndexedMesh&) {
+    named.push_back(target_faces);
+  };
+  const std::vector<std::uint64_t> expected = {(faces + 1) / 2, (faces + 5) / 10, (faces + 50) / 100};
+  for (bool two_stage : {false, true}) {
+    SCOPED_TRACE(two_stage ? "clustered" : "in core");
+    options.two_stage = two_stage;
+    options.intermediate = two_stage ? 1.5 : 0;
+    named.clear();
+    const LodResult result = lod(obj, options);
+    EXPECT_EQ(result.clustered, two_stage);
+    EXPECT_EQ(result.input_faces, faces);
+    ASSERT_EQ(result.levels.size(), 3u);
+    EXPECT_EQ(named, expected);
+    const double ratios[] = {0.5, 0.1, 0.01};
+    for (std::size_t i = 0; i < 3; ++i) {
+      EXPECT_EQ(result.levels[i].target_faces, expected[i]);
+      EXPECT_EQ(result.levels[i].faces, expected[i]);
+      EXPECT_EQ(result.levels[i].target_ratio, ratios[i]);
+    }
+  }
 }
 
 TEST(Lod, EachLevelIsTheDecimationOfThePreviousWithItsQuadricsCarried) {
@@ -520,6 +555,30 @@ TEST(Lod, RefusesBadLevelsAndPatterns) {
   EXPECT_THROW(lod(path, options), Error);
   options.level_faces = {100, 50, 100};
   EXPECT_THROW(lod(path, options), Error);
+  // Ratios: in (0, 1], distinct, apart enough to give distinct counts, and not beside face counts.
+  options.level_faces = {100};
+  options.level_ratios = {0.1};
+  EXPECT_THROW(lod(path, options), Error);
+  options.level_faces.clear();
+  for (const std::vector<double>& bad :
+       {std::vector<double>{0.1, 0}, {1.5}, {-0.1}, {0.1, std::nan("")}, {0.2, 0.1, 0.2}}) {
+    options.level_ratios = bad;
+    EXPECT_THROW(lod(path, options), Error);
+  }
+  options.level_ratios = {0.1, 0.01001, 0.01};  // 48 twice of the scan's 4,800 faces
+  const std::uint64_t faces = read_mesh(path).face_count();
+  ASSERT_EQ(faces, 4800u);
+  try {
+    lod(path, options);
+    ADD_FAILURE() << "two ratios of one count were taken";
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("0.01001 and 0.01 both give 48 faces of its 4800"), std::string::npos) << what;
+  }
+  options.level_ratios = {1, 0.1};
+  const LodResult whole = lod(path, options);
+  ASSERT_EQ(whole.levels.size(), 2u);
+  EXPECT_EQ(whole.levels[0].faces, whole.input_faces);
   EXPECT_EQ(lod_level_path("out_{faces}.ply", 1000, true), "out_1000.ply");
   EXPECT_EQ(lod_level_path("{faces}/m{faces}.obj", 7, true), "7/m7.obj");
   EXPECT_EQ(lod_level_path("single.ply", 7, false), "single.ply");

@@ -23,7 +23,7 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   clustered, out_of_core, intermediate_faces, memory_limit_bytes, peak_rss_bytes, seconds   as in simplify
   max_error           the last (smallest) level's max_error
   levels              largest first: [{target_faces, faces, vertices, file, seconds, max_error, level_max_error,
-                      target_reached, stop}]; max_error is the largest collapse cost down the chain up to this
+                      target_reached, stop}], and target_ratio with --ratios; max_error is the largest collapse cost down the chain up to this
                       level, or the clustering stage's vertex error where larger, as a distance to the original
                       surface (carried quadrics); level_max_error is this level's own run's largest cost
   phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}]: open, read or cluster,
@@ -50,6 +50,28 @@ std::vector<std::uint64_t> parse_levels(const std::string& text) {
   return levels;
 }
 
+std::vector<double> parse_ratios(const std::string& text) {
+  std::vector<double> ratios;
+  std::stringstream stream(text);
+  std::string item;
+  while (std::getline(stream, item, ',')) {
+    std::size_t used = 0;
+    double value = 0;
+    try {
+      value = std::stod(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size() || !(value > 0 && value <= 1)) {
+      throw Error("--ratios: '" + item +
+                  "' is not a ratio of the input's faces (give numbers in (0, 1] separated by commas)");
+    }
+    ratios.push_back(value);
+  }
+  if (ratios.empty()) throw Error("--ratios: no level given");
+  return ratios;
+}
+
 }  // namespace
 
 void add_lod_command(CLI::App& app) {
@@ -60,7 +82,7 @@ void add_lod_command(CLI::App& app) {
       "atomically");
   cmd->footer(kReportFields);
   struct Flags {
-    std::string input, output, report, memory_limit, faces;
+    std::string input, output, report, memory_limit, faces, ratios;
     LodOptions options;
     bool ascii = false;
     bool quiet = false;
@@ -71,9 +93,12 @@ void add_lod_command(CLI::App& app) {
   cmd->add_option("-o,--output", flags->output,
                   "Output pattern; {faces} becomes each level's target, e.g. 'out_{faces}.ply'")
       ->required();
-  cmd->add_option("--faces", flags->faces,
-                  "Face counts of the levels, comma-separated, e.g. 1000000,100000,10000")
-      ->required();
+  auto* faces = cmd->add_option("--faces", flags->faces,
+                                "Face counts of the levels, comma-separated, e.g. 1000000,100000,10000");
+  cmd->add_option("--ratios", flags->ratios,
+                  "Or the levels as ratios of the input's faces, comma-separated, e.g. 0.1,0.01,0.001; "
+                  "{faces} then becomes each ratio's count")
+      ->excludes(faces);
   cmd->add_option("--memory-limit", flags->memory_limit,
                   "Peak memory budget, e.g. 2G (default: a third of RAM)")
       ->check(byte_size());
@@ -95,12 +120,20 @@ void add_lod_command(CLI::App& app) {
   cmd->callback([flags] {
     LodOptions options = flags->options;
     const auto limit = limit_threads(options.threads);
-    options.level_faces = parse_levels(flags->faces);
-    const bool several = options.level_faces.size() > 1;
-    // Refuse a bad pattern or format before reading anything.
+    if (flags->faces.empty() == flags->ratios.empty())
+      throw Error("lod needs its levels: --faces N,M,... or --ratios R,S,...");
+    if (!flags->faces.empty()) options.level_faces = parse_levels(flags->faces);
+    if (!flags->ratios.empty()) options.level_ratios = parse_ratios(flags->ratios);
+    const bool several = options.level_faces.size() + options.level_ratios.size() > 1;
+    // Refuse a bad pattern or format before reading anything; a ratio's count is not known yet, but the
+    // folder and the format do not depend on it.
     std::vector<std::string> meshes{flags->input};
     for (std::uint64_t faces : options.level_faces) {
       meshes.push_back(lod_level_path(flags->output, faces, several));
+      check_mesh_destination(meshes.back());
+    }
+    if (!options.level_ratios.empty()) {
+      meshes.push_back(lod_level_path(flags->output, 1, several));
       check_mesh_destination(meshes.back());
     }
     if (!flags->report.empty()) check_report_destination(flags->report, meshes);
@@ -114,10 +147,8 @@ void add_lod_command(CLI::App& app) {
     WriteOptions write;
     write.ascii = flags->ascii;
     write.progress = progress;
-    std::vector<std::uint64_t> sorted = options.level_faces;
-    std::sort(sorted.begin(), sorted.end(), std::greater<>());
-    options.on_level = [&](std::size_t level, const IndexedMesh& mesh) {
-      files.push_back(lod_level_path(flags->output, sorted[level], several));
+    options.on_level = [&](std::size_t, std::uint64_t target_faces, const IndexedMesh& mesh) {
+      files.push_back(lod_level_path(flags->output, target_faces, several));
       vertices.push_back(mesh.vertex_count());
       write_result(files.back(), mesh, write);
     };
@@ -141,15 +172,17 @@ void add_lod_command(CLI::App& app) {
       report["levels"] = nlohmann::json::array();
       for (std::size_t i = 0; i < result.levels.size(); ++i) {
         const LodLevel& level = result.levels[i];
-        report["levels"].push_back({{"target_faces", level.target_faces},
-                                    {"faces", level.faces},
-                                    {"vertices", vertices[i]},
-                                    {"file", files[i]},
-                                    {"seconds", level.seconds},
-                                    {"max_error", level.max_error},
-                                    {"level_max_error", level.decimate.max_error},
-                                    {"target_reached", level.decimate.target_reached},
-                                    {"stop", stop_name(level.decimate.stop)}});
+        nlohmann::json entry = {{"target_faces", level.target_faces},
+                                {"faces", level.faces},
+                                {"vertices", vertices[i]},
+                                {"file", files[i]},
+                                {"seconds", level.seconds},
+                                {"max_error", level.max_error},
+                                {"level_max_error", level.decimate.max_error},
+                                {"target_reached", level.decimate.target_reached},
+                                {"stop", stop_name(level.decimate.stop)}};
+        if (level.target_ratio > 0) entry["target_ratio"] = level.target_ratio;
+        report["levels"].push_back(std::move(entry));
       }
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);

@@ -412,18 +412,47 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   return result;
 }
 
+namespace {
+
+std::string format_ratio(double ratio) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", ratio);
+  return text;
+}
+
+// Ratio levels: in (0, 1] and distinct, largest first.
+std::vector<double> sorted_ratios(const LodOptions& options) {
+  std::vector<double> ratios = options.level_ratios;
+  for (double r : ratios) {
+    if (!(r > 0 && r <= 1)) throw Error("lod: a ratio of " + format_ratio(r) + ": ratios must be in (0, 1]");
+  }
+  std::sort(ratios.begin(), ratios.end(), std::greater<>());
+  if (const auto twice = std::adjacent_find(ratios.begin(), ratios.end()); twice != ratios.end())
+    throw Error("lod: the ratio " + format_ratio(*twice) + " is given twice");
+  return ratios;
+}
+
+}  // namespace
+
 LodResult lod(const std::string& input_path, const LodOptions& options) {
-  if (options.level_faces.empty()) throw Error("lod needs at least one level (--faces N,M,...)");
+  const bool by_ratio = !options.level_ratios.empty();
+  if (options.level_faces.empty() == !by_ratio)
+    throw Error("lod needs its levels as face counts or as ratios, one of the two (--faces or --ratios)");
   std::vector<std::uint64_t> levels = options.level_faces;
+  const std::vector<double> ratios = by_ratio ? sorted_ratios(options) : std::vector<double>{};
   std::sort(levels.begin(), levels.end(), std::greater<>());
-  if (levels.back() == 0) throw Error("lod: a level of 0 faces");
+  if (!by_ratio && levels.back() == 0) throw Error("lod: a level of 0 faces");
   if (std::adjacent_find(levels.begin(), levels.end()) != levels.end()) {
     throw Error("lod: the level " + std::to_string(*std::adjacent_find(levels.begin(), levels.end())) +
                 " is given twice");
   }
 
   SimplifyOptions first;
-  first.target_faces = levels.front();
+  if (by_ratio) {
+    first.target_ratio = ratios.front();
+  } else {
+    first.target_faces = levels.front();
+  }
   first.memory_limit = options.memory_limit;
   first.two_stage = options.two_stage;
   first.intermediate = options.intermediate;
@@ -433,7 +462,21 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   first.progress = options.progress;
   check_common(first);
   FirstStage stage = first_stage(input_path, first);
-
+  if (by_ratio) {
+    // The input's count is exact now: read, or counted by the clustering pass.
+    SimplifyOptions level;
+    for (std::size_t i = 0; i < ratios.size(); ++i) {
+      level.target_ratio = ratios[i];
+      levels.push_back(count_target(level, stage.input_faces));
+      if (i > 0 && levels[i] == levels[i - 1]) {
+        throw Error(input_path, {},
+                    "the ratios " + format_ratio(ratios[i - 1]) + " and " + format_ratio(ratios[i]) +
+                        " both give " + std::to_string(levels[i]) + (levels[i] == 1 ? " face" : " faces") +
+                        " of its " + std::to_string(stage.input_faces) +
+                        " (give fewer or farther-apart levels)");
+      }
+    }
+  }
   LodResult result;
   report_first_stage(stage, result);
 
@@ -459,12 +502,13 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
 
     LodLevel level;
     level.target_faces = levels[i];
+    if (by_ratio) level.target_ratio = ratios[i];
     level.faces = decimated.mesh.face_count();
     level.decimate = decimated.stats;
     max_error = std::max(max_error, decimated.stats.max_error);
     level.max_error = max_error;
     if (options.on_level) {
-      options.on_level(i, decimated.mesh);
+      options.on_level(i, levels[i], decimated.mesh);
     } else {
       level.mesh = decimated.mesh;
     }

@@ -108,6 +108,10 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
 struct LodOptions {
   // Face counts of the levels, in any order (they run largest first); each must be at least 1 and distinct.
   std::vector<std::uint64_t> level_faces;
+  // Or, instead, ratios of the input's faces, each in (0, 1] and distinct: a level's count is the ratio of
+  // the triangles read (polygons fan-triangulated), rounded, at least 1, once the input is read or clustered.
+  // Ratios that round to the same count are refused, naming both.
+  std::vector<double> level_ratios;
 
   // As in SimplifyOptions; they decide how the input becomes the first level's decimator input.
   std::uint64_t memory_limit = 0;
@@ -119,14 +123,16 @@ struct LodOptions {
   ProgressFn progress;
   WarningFn warn;
 
-  // Called with each level as soon as it exists, largest first (e.g. to write it). When set, the meshes are
-  // not kept in LodResult, so memory holds at most two levels at a time.
-  std::function<void(std::size_t level, const IndexedMesh& mesh)> on_level;
+  // Called with each level as soon as it exists, largest first (e.g. to write it), with its face target
+  // (resolved from its ratio when ratios are given). When set, the meshes are not kept in LodResult, so
+  // memory holds at most two levels at a time.
+  std::function<void(std::size_t level, std::uint64_t target_faces, const IndexedMesh& mesh)> on_level;
 };
 
 struct LodLevel {
   std::uint64_t target_faces = 0;
-  IndexedMesh mesh;  // empty when LodOptions::on_level is set
+  double target_ratio = 0;  // the ratio target_faces comes from (0: given as a count)
+  IndexedMesh mesh;         // empty when LodOptions::on_level is set
   std::uint64_t faces = 0;
   double seconds = 0;  // decimating this level (and on_level)
   // Largest collapse cost so far down the chain, as a distance to the original surface in model units
