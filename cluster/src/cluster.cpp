@@ -49,7 +49,7 @@ void drop_untouched(FineCells& cells) {
       if (cells.has_border()) cells.border[kept] = cells.border[i];
       cells.points[kept] = cells.points[i];
       cells.point_sum[kept] = cells.point_sum[i];
-      if (!cells.point_box.empty()) cells.point_box[kept] = cells.point_box[i];
+      cells.point_box[kept] = cells.point_box[i];
       if (!cells.normal_sum.empty()) cells.normal_sum[kept] = cells.normal_sum[i];
       if (!cells.color_sum.empty()) cells.color_sum[kept] = cells.color_sum[i];
       if (!cells.uv_sum.empty()) cells.uv_sum[kept] = cells.uv_sum[i];

@@ -155,7 +155,8 @@ PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, doub
   const Box3 cell_box = cells.grid.cell_box(key);
   s.box = Box3f::around(cell_box);
   Box3 point_box = cell_box;
-  if (cell < cells.point_box.size() && !box_empty(cells.point_box[cell])) {
+  // Every touched cell has a point; the cell's box stands in should one have none.
+  if (!box_empty(cells.point_box[cell])) {
     const PointBox& b = cells.point_box[cell];
     const double bin = cells.grid.cell / kPointBoxBins;
     for (int a = 0; a < 3; ++a) {
