@@ -95,6 +95,10 @@ constexpr std::uint64_t kReferenced = std::uint64_t{1} << 63;
 std::int64_t quantum(std::uint64_t q, int a) {
   return static_cast<std::int64_t>(a == 2 ? q >> 42 : (q >> (21 * a)) & kQuantumMax);
 }
+// Adds a vertex of quanta q (without kReferenced) to a box of its cell's points.
+void add_quanta(PointBox& box, std::uint64_t q) {
+  for (int a = 0; a < 3; ++a) add_bin(box, a, static_cast<std::uint32_t>(quantum(q, a) >> kQuantumBinShift));
+}
 // (Through int32: converting an unsigned 64-bit integer to double costs a branch on x86-64 before AVX-512.)
 Vec3d dequantize(std::uint64_t q) {
   return Vec3d(static_cast<double>(static_cast<std::int32_t>(q & kQuantumMax)),
@@ -1285,13 +1289,16 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
       const std::size_t first = start + j * kChunkVertices, last = std::min(end, first + kChunkVertices);
       if (!normals && !colors && !uvs) {
         // Positions only, the common case, in a loop of its own: a run of vertices in one cell adds to a
-        // sum held in registers (the same additions in the same order), stored when the cell changes.
+        // sum and a box held in registers (the same additions in the same order), stored when the cell
+        // changes.
         std::uint32_t current = ~std::uint32_t{0}, s = 0, count_in_run = 0;
         float sx = 0, sy = 0, sz = 0;
+        PointBox run_box{};
         auto flush = [&] {
           if (current == ~std::uint32_t{0}) return;
           chunk.points[s] += count_in_run;
           chunk.point_sum[s] = Vec3f(sx, sy, sz);
+          merge_box(chunk.point_box[s], run_box);
         };
         for (std::size_t v = first; v < last; ++v) {
           std::uint32_t cell;
@@ -1304,12 +1311,12 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
             current = cell;
             s = chunk.slot(cell);
             count_in_run = 0;
+            run_box = PointBox{};
             const Vec3f& sum = chunk.point_sum[s];
             sx = sum.x(), sy = sum.y(), sz = sum.z();
           }
           ++count_in_run;
-          for (int a = 0; a < 3; ++a)
-            add_bin(chunk.point_box[s], a, static_cast<std::uint32_t>(quantum(q, a) >> kQuantumBinShift));
+          add_quanta(run_box, q);
           // An offset in quanta is exact in float, and so is its scaling: the bits of dequantize()'s value
           // rounded to float.
           sx += static_cast<float>(quantum(q, 0)) * static_cast<float>(1.0 / kQuantum);
@@ -1329,8 +1336,7 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
         const std::uint32_t s = chunk.slot(cell);
         ++chunk.points[s];
         chunk.point_sum[s] += dequantize(q).cast<float>();
-        for (int a = 0; a < 3; ++a)
-          add_bin(chunk.point_box[s], a, static_cast<std::uint32_t>(quantum(q, a) >> kQuantumBinShift));
+        add_quanta(chunk.point_box[s], q);
         chunk.attributes.add_vertex(s, vertices, v);
       }
       chunk.sort_by_cell();
