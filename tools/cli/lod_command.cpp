@@ -23,53 +23,52 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   clustered, out_of_core, intermediate_faces, memory_limit_bytes, peak_rss_bytes, seconds   as in simplify
   max_error           the last (smallest) level's max_error
   levels              largest first: [{target_faces, faces, vertices, file, seconds, max_error, level_max_error,
-                      target_reached, stop}], and target_ratio with --ratios; max_error is the largest collapse cost down the chain up to this
-                      level, or the clustering stage's vertex error where larger, as a distance to the original
-                      surface (carried quadrics); level_max_error is this level's own run's largest cost
+                      target_reached, stop}], and target_ratio with --ratios; max_error is the largest
+                      collapse cost down the chain up to this level, or the clustering stage's vertex error
+                      where larger, as a distance to the original surface (carried quadrics); level_max_error
+                      is this level's own run's largest cost
   phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}]: open, read or cluster,
                       then "level N" per level (decimating it and writing its file))";
 
-std::vector<std::uint64_t> parse_levels(const std::string& text) {
-  std::vector<std::uint64_t> levels;
+// A comma-separated list of levels for `flag`. `parse` reads an item as std::stoull and std::stod do (the
+// value, and the characters used), which must be the whole item and a value `valid` accepts; `expected` says
+// what an item must be.
+template <class T, class Parse, class Valid>
+std::vector<T> parse_levels(const std::string& text, const char* flag, const Parse& parse, const Valid& valid,
+                            const char* expected) {
+  std::vector<T> levels;
   std::stringstream stream(text);
   std::string item;
   while (std::getline(stream, item, ',')) {
-    std::size_t used = 0;
-    unsigned long long value = 0;
+    T value{};
+    bool whole = false;
     try {
-      value = std::stoull(item, &used);
+      std::size_t used = 0;
+      value = parse(item, &used);
+      whole = used != 0 && used == item.size();
     } catch (const std::exception&) {
-      used = 0;
     }
-    if (used == 0 || used != item.size() || value == 0 || item[0] == '-') {
-      throw Error("--faces: '" + item + "' is not a face count (give positive integers separated by commas)");
+    if (!whole || !valid(item, value)) {
+      throw Error(std::string(flag) + ": '" + item + "' is not " + expected);
     }
     levels.push_back(value);
   }
-  if (levels.empty()) throw Error("--faces: no level given");
+  if (levels.empty()) throw Error(std::string(flag) + ": no level given");
   return levels;
 }
 
-std::vector<double> parse_ratios(const std::string& text) {
-  std::vector<double> ratios;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
-    std::size_t used = 0;
-    double value = 0;
-    try {
-      value = std::stod(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != item.size() || !(value > 0 && value <= 1)) {
-      throw Error("--ratios: '" + item +
-                  "' is not a ratio of the input's faces (give numbers in (0, 1] separated by commas)");
-    }
-    ratios.push_back(value);
-  }
-  if (ratios.empty()) throw Error("--ratios: no level given");
-  return ratios;
+std::vector<std::uint64_t> parse_face_levels(const std::string& text) {
+  return parse_levels<std::uint64_t>(
+      text, "--faces", [](const std::string& item, std::size_t* used) { return std::stoull(item, used); },
+      [](const std::string& item, std::uint64_t value) { return value > 0 && item[0] != '-'; },
+      "a face count (give positive integers separated by commas)");
+}
+
+std::vector<double> parse_ratio_levels(const std::string& text) {
+  return parse_levels<double>(
+      text, "--ratios", [](const std::string& item, std::size_t* used) { return std::stod(item, used); },
+      [](const std::string&, double value) { return value > 0 && value <= 1; },
+      "a ratio of the input's faces (give numbers in (0, 1] separated by commas)");
 }
 
 }  // namespace
@@ -122,8 +121,8 @@ void add_lod_command(CLI::App& app) {
     const auto limit = limit_threads(options.threads);
     if (flags->faces.empty() == flags->ratios.empty())
       throw Error("lod needs its levels: --faces N,M,... or --ratios R,S,...");
-    if (!flags->faces.empty()) options.level_faces = parse_levels(flags->faces);
-    if (!flags->ratios.empty()) options.level_ratios = parse_ratios(flags->ratios);
+    if (!flags->faces.empty()) options.level_faces = parse_face_levels(flags->faces);
+    if (!flags->ratios.empty()) options.level_ratios = parse_ratio_levels(flags->ratios);
     const bool several = options.level_faces.size() + options.level_ratios.size() > 1;
     // Refuse a bad pattern or format before reading anything; a ratio's count is not known yet, but the
     // folder and the format do not depend on it.
