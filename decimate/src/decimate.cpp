@@ -2463,6 +2463,11 @@ struct Decimator {
 
 }  // namespace
 
+std::uint64_t ratio_target(double ratio, std::uint64_t faces) {
+  return std::max<std::uint64_t>(
+      1, static_cast<std::uint64_t>(std::llround(ratio * static_cast<double>(faces))));
+}
+
 const char* stop_name(DecimateStop stop) {
   switch (stop) {
     case DecimateStop::target_reached:
@@ -2500,10 +2505,8 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   arena.execute([&] { d.build(input); });
   d.target_f = options.target_faces;
   if (options.target_ratio > 0) {
-    const auto by_ratio =
-        static_cast<std::uint64_t>(std::llround(options.target_ratio * double(d.stats.input_faces)));
-    const std::uint64_t ratio_target = std::max<std::uint64_t>(by_ratio, 1);
-    d.target_f = d.target_f > 0 ? std::min(d.target_f, ratio_target) : ratio_target;
+    const std::uint64_t by_ratio = ratio_target(options.target_ratio, d.stats.input_faces);
+    d.target_f = d.target_f > 0 ? std::min(d.target_f, by_ratio) : by_ratio;
   }
   d.target_v = options.target_vertices;
   arena.execute([&] { d.start(); });

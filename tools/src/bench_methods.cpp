@@ -310,8 +310,7 @@ BenchMethod parse_bench_method(std::string_view name) {
 
 std::uint64_t target_from_ratio(double ratio, std::uint64_t faces) {
   if (!(ratio > 0 && ratio <= 1)) throw Error("bench: a ratio must be in (0, 1], not " + format("%g", ratio));
-  return std::max<std::uint64_t>(
-      1, static_cast<std::uint64_t>(std::llround(ratio * static_cast<double>(faces))));
+  return ratio_target(ratio, faces);
 }
 
 BenchResult run_bench_method(const BenchInput& input, const DistanceIndex& original, BenchMethod method,

@@ -92,8 +92,7 @@ using Clock = std::chrono::steady_clock;
 std::uint64_t count_target(const SimplifyOptions& options, std::uint64_t faces) {
   std::uint64_t target = options.target_faces;
   if (options.target_ratio > 0 && faces > 0) {
-    const auto by_ratio = std::max<std::uint64_t>(
-        1, static_cast<std::uint64_t>(std::llround(options.target_ratio * static_cast<double>(faces))));
+    const std::uint64_t by_ratio = ratio_target(options.target_ratio, faces);
     target = target > 0 ? std::min(target, by_ratio) : by_ratio;
   }
   return target;
@@ -464,10 +463,8 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   FirstStage stage = first_stage(input_path, first);
   if (by_ratio) {
     // The input's count is exact now: read, or counted by the clustering pass.
-    SimplifyOptions level;
     for (std::size_t i = 0; i < ratios.size(); ++i) {
-      level.target_ratio = ratios[i];
-      levels.push_back(count_target(level, stage.input_faces));
+      levels.push_back(ratio_target(ratios[i], stage.input_faces));
       if (i > 0 && levels[i] == levels[i - 1]) {
         throw Error(input_path, {},
                     "the ratios " + format_ratio(ratios[i - 1]) + " and " + format_ratio(ratios[i]) +

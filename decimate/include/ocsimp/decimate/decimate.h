@@ -163,6 +163,10 @@ struct DecimateResult {
 // is neither 0 nor the vertex count, no stopping criterion, or a ratio outside (0, 1].
 DecimateResult decimate(QuadricMesh input, const DecimateOptions& options);
 
+// The face target a ratio gives of `faces` faces, as DecimateOptions::target_ratio takes it: round(ratio *
+// faces), at least 1. For callers that resolve a ratio themselves (a chain of levels, a clustering plan).
+std::uint64_t ratio_target(double ratio, std::uint64_t faces);
+
 const char* stop_name(DecimateStop stop);
 
 }  // namespace ocsimp
