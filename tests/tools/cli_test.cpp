@@ -494,6 +494,16 @@ TEST(Cli, LodTakesItsLevelsAsRatiosOfTheFacesRead) {
   }
   for (const auto& entry : std::filesystem::directory_iterator(dir.path))
     EXPECT_EQ(entry.path().filename().string().rfind("bad_", 0), std::string::npos) << entry.path();
+  // A report named like a level's file, known only once the input is read, is refused before any level is
+  // written, rather than written over it.
+  const auto first = static_cast<std::uint64_t>(std::llround(0.1 * static_cast<double>(faces)));
+  const std::string clash = dir / ("clash_" + std::to_string(first) + ".ply");
+  const CommandResult refused = run(
+      "lod " + scan + " -o '" + (dir / "clash_{faces}.ply") + "' --ratios 0.1,0.01 --report " + clash, dir);
+  EXPECT_EQ(refused.exit_code, 2);
+  EXPECT_EQ(lines(refused.err), 1u) << refused.err;
+  EXPECT_NE(refused.err.find("would overwrite the mesh file"), std::string::npos) << refused.err;
+  EXPECT_FALSE(std::filesystem::exists(clash));
 }
 
 TEST(Cli, LodRefusesAPatternWithoutFacesForSeveralLevels) {

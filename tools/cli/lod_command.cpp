@@ -148,6 +148,10 @@ void add_lod_command(CLI::App& app) {
     write.progress = progress;
     options.on_level = [&](std::size_t, std::uint64_t target_faces, const IndexedMesh& mesh) {
       files.push_back(lod_level_path(flags->output, target_faces, several));
+      // A ratio's file is named only now: the report written at the end must not replace it. Levels come
+      // largest first, so a clash with the first one stops the run before any file is written.
+      if (!flags->report.empty() && !options.level_ratios.empty())
+        check_report_destination(flags->report, {files.back()});
       vertices.push_back(mesh.vertex_count());
       write_result(files.back(), mesh, write);
     };
