@@ -506,6 +506,39 @@ TEST(Cli, LodTakesItsLevelsAsRatiosOfTheFacesRead) {
   EXPECT_FALSE(std::filesystem::exists(clash));
 }
 
+// A pattern easily names the input itself (lod in_500.ply -o 'in_{faces}.ply'): the run is refused before any
+// level is written, whether the clashing level is given as a count or comes from a ratio.
+TEST(Cli, LodRefusesALevelFileThatWouldReplaceItsInput) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply";
+  ASSERT_EQ(run("gen -q --triangles 20000 -o " + scan, dir).exit_code, 0);
+  const std::uint64_t faces = read_mesh(scan).face_count();
+  const auto tenth = static_cast<std::uint64_t>(std::llround(0.1 * static_cast<double>(faces)));
+  const std::string input = dir / ("in_" + std::to_string(tenth) + ".ply");
+  std::filesystem::copy_file(scan, input);
+  const std::string before = file_bytes(input);
+  for (const std::string& levels :
+       {"--faces 5000," + std::to_string(tenth), std::string("--ratios 0.5,0.1")}) {
+    SCOPED_TRACE(levels);
+    // Spelled through ./ so that only the resolved paths agree.
+    const CommandResult r =
+        run("lod " + input + " -o '" + dir.path.string() + "/./in_{faces}.ply' " + levels, dir);
+    EXPECT_EQ(r.exit_code, 2);
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_NE(r.err.find("would replace the input"), std::string::npos) << r.err;
+    EXPECT_EQ(file_bytes(input), before);
+    for (const auto& entry : std::filesystem::directory_iterator(dir.path)) {
+      if (entry.path().string() == input) continue;
+      EXPECT_NE(entry.path().filename().string().rfind("in_", 0), 0u) << entry.path() << " was written";
+    }
+  }
+  // A level of another count beside the input is fine.
+  const CommandResult ok = run("lod " + input + " -o '" + (dir / "in_{faces}.ply") + "' --faces 500", dir);
+  ASSERT_EQ(ok.exit_code, 0) << ok.err;
+  EXPECT_EQ(read_mesh(dir / "in_500.ply").face_count(), 500u);
+  EXPECT_EQ(file_bytes(input), before);
+}
+
 TEST(Cli, LodRefusesAPatternWithoutFacesForSeveralLevels) {
   test::TempDir dir;
   const std::string scan = dir / "scan.ply";

@@ -497,7 +497,11 @@ TEST(Lod, RatiosResolveAgainstTheTrianglesRead) {
   const std::uint64_t faces = scan.face_count();
   LodOptions options;
   options.level_ratios = {0.01, 0.5, 0.1};
-  std::vector<std::uint64_t> named;
+  std::vector<std::uint64_t> named, announced;
+  options.on_targets = [&](const std::vector<std::uint64_t>& targets) {
+    EXPECT_TRUE(named.empty()) << "the targets come before the first level";
+    announced = targets;
+  };
   options.on_level = [&](std::size_t, std::uint64_t target_faces, const IndexedMesh&) {
     named.push_back(target_faces);
   };
@@ -507,10 +511,12 @@ TEST(Lod, RatiosResolveAgainstTheTrianglesRead) {
     options.two_stage = two_stage;
     options.intermediate = two_stage ? 1.5 : 0;
     named.clear();
+    announced.clear();
     const LodResult result = lod(obj, options);
     EXPECT_EQ(result.clustered, two_stage);
     EXPECT_EQ(result.input_faces, faces);
     ASSERT_EQ(result.levels.size(), 3u);
+    EXPECT_EQ(announced, expected);
     EXPECT_EQ(named, expected);
     const double ratios[] = {0.5, 0.1, 0.01};
     for (std::size_t i = 0; i < 3; ++i) {

@@ -232,17 +232,20 @@ FileFormat check_mesh_destination(const std::string& path) {
   return format;
 }
 
-void check_report_destination(const std::string& report, const std::vector<std::string>& meshes) {
-  check_destination(report);
-  // The same file however it is spelled (./a.ply, a symbolic link); the output need not exist yet.
+bool same_file(const std::string& a, const std::string& b) {
+  // Compared by resolved path rather than by inode: a destination need not exist yet.
   auto resolved = [](const std::string& path) {
     std::error_code error;
     const std::filesystem::path canonical = std::filesystem::weakly_canonical(path, error);
     return error ? std::filesystem::absolute(path).lexically_normal() : canonical;
   };
-  const std::filesystem::path target = resolved(report);
+  return resolved(a) == resolved(b);
+}
+
+void check_report_destination(const std::string& report, const std::vector<std::string>& meshes) {
+  check_destination(report);
   for (const std::string& mesh : meshes) {
-    if (resolved(mesh) == target) throw Error(report, {}, "the report would overwrite the mesh file " + mesh);
+    if (same_file(mesh, report)) throw Error(report, {}, "the report would overwrite the mesh file " + mesh);
   }
 }
 

@@ -69,6 +69,10 @@ void check_destination(const std::string& path);
 // A mesh destination: its extension must name a format (returned), and check_destination must pass.
 FileFormat check_mesh_destination(const std::string& path);
 
+// Whether two paths name the same file however they are spelled (./a.ply, a symbolic link to it); either
+// may not exist yet.
+bool same_file(const std::string& a, const std::string& b);
+
 // check_destination for a --report path, which must also not name any of the command's mesh files: the
 // JSON would replace the result, or the input itself.
 void check_report_destination(const std::string& report, const std::vector<std::string>& meshes);

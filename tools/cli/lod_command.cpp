@@ -124,18 +124,26 @@ void add_lod_command(CLI::App& app) {
     if (!flags->faces.empty()) options.level_faces = parse_face_levels(flags->faces);
     if (!flags->ratios.empty()) options.level_ratios = parse_ratio_levels(flags->ratios);
     const bool several = options.level_faces.size() + options.level_ratios.size() > 1;
-    // Refuse a bad pattern or format before reading anything; a ratio's count is not known yet, but the
-    // folder and the format do not depend on it.
-    std::vector<std::string> meshes{flags->input};
-    for (std::uint64_t faces : options.level_faces) {
-      meshes.push_back(lod_level_path(flags->output, faces, several));
-      check_mesh_destination(meshes.back());
-    }
+    // The levels' files may not replace the input (a pattern such as in_{faces}.ply easily names it), nor may
+    // the report replace a level. Checked before anything is read for counts; a ratio's file is named only
+    // once the input's count is known (on_targets), but its folder and format do not depend on that.
+    auto check_level_files = [flags, several](const std::vector<std::uint64_t>& levels) {
+      std::vector<std::string> meshes{flags->input};
+      for (std::uint64_t faces : levels) {
+        meshes.push_back(lod_level_path(flags->output, faces, several));
+        check_mesh_destination(meshes.back());
+        if (same_file(meshes.back(), flags->input))
+          throw Error(meshes.back(), {},
+                      "the level of " + std::to_string(faces) + " faces would replace the input");
+      }
+      if (!flags->report.empty()) check_report_destination(flags->report, meshes);
+    };
+    if (!options.level_faces.empty()) check_level_files(options.level_faces);
     if (!options.level_ratios.empty()) {
-      meshes.push_back(lod_level_path(flags->output, 1, several));
-      check_mesh_destination(meshes.back());
+      check_mesh_destination(lod_level_path(flags->output, 1, several));
+      if (!flags->report.empty()) check_report_destination(flags->report, {flags->input});
+      options.on_targets = check_level_files;
     }
-    if (!flags->report.empty()) check_report_destination(flags->report, meshes);
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const Console console = make_console(flags->quiet, flags->input);
     const ProgressFn& progress = console.progress;
@@ -148,10 +156,6 @@ void add_lod_command(CLI::App& app) {
     write.progress = progress;
     options.on_level = [&](std::size_t, std::uint64_t target_faces, const IndexedMesh& mesh) {
       files.push_back(lod_level_path(flags->output, target_faces, several));
-      // A ratio's file is named only now: the report written at the end must not replace it. Levels come
-      // largest first, so a clash with the first one stops the run before any file is written.
-      if (!flags->report.empty() && !options.level_ratios.empty())
-        check_report_destination(flags->report, {files.back()});
       vertices.push_back(mesh.vertex_count());
       write_result(files.back(), mesh, write);
     };

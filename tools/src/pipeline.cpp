@@ -474,6 +474,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
       }
     }
   }
+  if (options.on_targets) options.on_targets(levels);
   LodResult result;
   report_first_stage(stage, result);
 

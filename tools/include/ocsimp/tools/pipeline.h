@@ -123,6 +123,10 @@ struct LodOptions {
   ProgressFn progress;
   WarningFn warn;
 
+  // Called once with every level's face target, largest first, as soon as all are known (with ratios, once
+  // the input is read or clustered) and before the first level is made: e.g. to check the names of the
+  // files they will go to. An Error it throws ends the run with nothing written.
+  std::function<void(const std::vector<std::uint64_t>& target_faces)> on_targets;
   // Called with each level as soon as it exists, largest first (e.g. to write it), with its face target
   // (resolved from its ratio when ratios are given). When set, the meshes are not kept in LodResult, so
   // memory holds at most two levels at a time.
