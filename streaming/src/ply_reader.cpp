@@ -6,6 +6,10 @@
 // precedes the vertex element, a first pass walks past the faces (checking their structure) to reach the
 // vertices, then seeks back, so memory never holds more than the vertices and one batch.
 //
+// Texture coordinates given per face corner (a face list "texcoord" of u v pairs, as MeshLab writes a
+// textured mesh) take one more pass over the faces before the vertices are handed out: each vertex gets
+// those of the first corner that references it, as OBJ's vt do, so a vertex on a uv seam keeps one side's.
+//
 // Common layouts take fast paths: vertex records of exactly float x,y,z are copied in bulk, binary face
 // records that hold only an int/uint index list are decoded at fixed offsets while their count is 3, and
 // ascii numbers are parsed in place (fast_float for reals, by hand for integers). Everything else goes
@@ -309,6 +313,10 @@ class PlyStream final : public TriangleStream {
   std::uint64_t bytes_read() const override;
   std::uint64_t bytes_total() const override { return bytes_total_; }
   const std::string& path() const override { return reader_.path(); }
+  // Out of core the vertices go to the sink as they load, before per-corner texture coordinates are read.
+  std::string attributes_left_out() const override {
+    return vertex_sink_ && wedge_property_ ? attribute_list(false, false, true) : std::string();
+  }
 
  private:
   // -- positions for errors
@@ -371,7 +379,10 @@ class PlyStream final : public TriangleStream {
 
   // -- faces
   void read_face_values();
+  void check_corner(std::int64_t index, std::uint64_t offset) const;
   void add_corner(std::int64_t index, std::uint64_t offset);
+  void load_wedge_uvs();
+  void rewind_to_faces();
   template <class CountT, class IndexT, bool Swap>
   void read_triangle_records();
   bool read_fast_faces();
@@ -420,6 +431,7 @@ class PlyStream final : public TriangleStream {
   bool faces_first_ = false;  // the face element comes before the vertex element
   bool fast_faces_ = false;   // the face record is just the index list
   std::uint64_t face_offset_ = 0, face_line_ = 0, face_bytes_ = 0;
+  std::optional<std::size_t> wedge_property_;  // the face element's per-corner "texcoord" list
   std::uint64_t triangles_hint_ = 0;
   std::uint64_t bytes_total_ = 0;
 
@@ -441,7 +453,8 @@ class PlyStream final : public TriangleStream {
   std::int64_t strip_before_ = 0;                        // strips: the corner before previous_corner_
   std::uint64_t triangles_emitted_ = 0;
   bool faces_done_ = false;
-  bool second_pass_ = false;  // reading the faces again after a first pass over the whole file
+  // Bytes read by earlier passes beyond the present position (the faces read again after a pass over them).
+  std::uint64_t reread_bytes_ = 0;
 
   // Ascii cursor.
   const char* cursor_ = nullptr;
@@ -518,6 +531,10 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
                 "element " + face_element.name + " is empty");
   }
   faces_first_ = face_element_ < vertex_element_;
+  if (const auto texcoord = face_element.find("texcoord");
+      texcoord && !strips_ && !vertex_plan_.uvs && face_element.properties[*texcoord].is_list) {
+    wedge_property_ = texcoord;
+  }
   fast_faces_ = !strips_ && face_element.properties.size() == 1 &&
                 (ascii_ ? ply_type_is_integer(index_property.type)
                         : index_property.type == PlyType::int32 || index_property.type == PlyType::uint32);
@@ -541,23 +558,33 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     // Check the rest of the file now, then come back for the faces.
     for (++element; element < header_.elements.size(); ++element) skip_element(element);
     check_end_of_data();
-    reader_.seek(face_offset_);
-    cursor_ = lines_end_ = reader_.data();
-    file_end_ = false;
-    line_ = face_line_;
-    bytes_total_ += face_bytes_;
-    second_pass_ = true;
+    rewind_to_faces();
   } else {
     for (++element; element < face_element_; ++element) skip_element(element);
+    face_offset_ = byte_position();
+    face_line_ = line_;
+  }
+  if (wedge_property_ && !vertex_sink_) {
+    load_wedge_uvs();
+    face_bytes_ = byte_position() - face_offset_;
+    rewind_to_faces();
   }
   current_element_ = face_element_;
   current_record_ = 0;
 }
 
 std::uint64_t PlyStream::bytes_read() const {
-  const std::uint64_t position = byte_position();
-  // A second pass over the faces counts on top of the first full pass.
-  return second_pass_ ? reader_.file_size() + (position - face_offset_) : position;
+  return reread_bytes_ + byte_position();
+}
+
+// Back to the first face record, for another pass over the faces.
+void PlyStream::rewind_to_faces() {
+  reread_bytes_ += byte_position() - face_offset_;
+  bytes_total_ += face_bytes_;
+  reader_.seek(face_offset_);
+  cursor_ = lines_end_ = reader_.data();
+  file_end_ = false;
+  line_ = face_line_;
 }
 
 std::string PlyStream::where() const {
@@ -1158,17 +1185,21 @@ void PlyStream::finish_faces() {
   report_progress(true);
 }
 
-void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
-  if (strips_ && index == -1) {
-    corners_seen_ = 0;  // a new strip starts
-    return;
-  }
+void PlyStream::check_corner(std::int64_t index, std::uint64_t offset) const {
   if (index < 0 || static_cast<std::uint64_t>(index) >= vertex_count_) {
     const std::string reason = "vertex index " + std::to_string(index) + " is out of range (" +
                                std::to_string(vertex_count_) + " vertices) in " + where();
     if (ascii_) fail(reason);
     fail_at_byte(offset, reason);
   }
+}
+
+void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
+  if (strips_ && index == -1) {
+    corners_seen_ = 0;  // a new strip starts
+    return;
+  }
+  check_corner(index, offset);
   if (strips_) {
     if (corners_seen_ >= 2) {
       // Every other triangle of a strip is wound the other way; skip the degenerate ones that join strips.
@@ -1234,6 +1265,65 @@ void PlyStream::read_face_values() {
   end_record();
   in_record_ = false;
   if ((current_record_ & 0xfff) == 0) report_progress();
+}
+
+// Each vertex takes the texture coordinates of the first face corner that references it (see the top of the
+// file); a vertex no face references keeps (0, 0). The faces are checked as the stream will read them.
+void PlyStream::load_wedge_uvs() {
+  const PlyElement& element = header_.elements[face_element_];
+  const PlyProperty& indices = element.properties[index_property_];
+  const PlyProperty& texcoords = element.properties[*wedge_property_];
+  current_element_ = face_element_;
+  current_record_ = 0;
+  vertices_.uvs.assign(vertices_.positions.size(), Vec2f::Zero());
+  std::vector<bool> given(vertices_.positions.size(), false);
+  // One face's lists; they grow with the values actually read, never with a count the file claims.
+  std::vector<std::int64_t> corners;
+  std::vector<float> uv;
+  while (current_record_ < element.count) {
+    begin_record();
+    corners.clear();
+    uv.clear();
+    std::uint64_t uv_offset = 0;
+    for (std::size_t p = 0; p < element.properties.size(); ++p) {
+      const PlyProperty& property = element.properties[p];
+      if (p == index_property_) {
+        for (std::uint64_t n = read_list_count(property); n > 0; --n) {
+          const std::uint64_t offset = byte_position();
+          corners.push_back(read_integer(indices.type, "vertex index"));
+          check_corner(corners.back(), offset);
+        }
+      } else if (p == *wedge_property_) {
+        uv_offset = byte_position();
+        for (std::uint64_t n = read_list_count(property); n > 0; --n) {
+          const std::uint64_t offset = byte_position();
+          uv.push_back(to_float(read_number(texcoords.type)));
+          if (!std::isfinite(uv.back())) {
+            const std::string reason = "a texture coordinate that is not a finite float in " + where();
+            if (ascii_) fail(reason);
+            fail_at_byte(offset, reason);
+          }
+        }
+      } else {
+        skip_property(property);
+      }
+    }
+    // An empty list gives a face no coordinates, as a writer may for an untextured face.
+    if (!uv.empty() && uv.size() != 2 * corners.size()) {
+      const std::string reason = "texcoord holds " + std::to_string(uv.size()) + " numbers for " +
+                                 std::to_string(corners.size()) + " corners (two a corner) in " + where();
+      if (ascii_) fail(reason);
+      fail_at_byte(uv_offset, reason);
+    }
+    for (std::size_t k = 0; k < corners.size() && !uv.empty(); ++k) {
+      const auto v = static_cast<std::size_t>(corners[k]);
+      if (given[v]) continue;
+      given[v] = true;
+      vertices_.uvs[v] = Vec2f(uv[2 * k], uv[2 * k + 1]);
+    }
+    end_record();
+    if ((current_record_ & 0xfff) == 0) report_progress();
+  }
 }
 
 // Records of a count followed by the indices, nothing else, while the count is 3.

@@ -782,7 +782,7 @@ TEST(PlyLayout, UnknownElementsAndPropertiesAreSkipped) {
       "element vertex 4\nproperty float confidence\nproperty float x\nproperty list uchar int neighbors\n"
       "property float y\nproperty float z\nproperty double intensity\n"
       "element face 2\nproperty uchar flags\nproperty list uchar int vertex_indices\n"
-      "property list uchar float texcoord\nproperty int segment\n"
+      "property list uchar float weights\nproperty int segment\n"
       "element edge 3\nproperty int vertex1\nproperty int vertex2\n"
       "element nothing 1000000000000000\n"
       "end_header\n";
@@ -814,6 +814,92 @@ TEST(PlyLayout, UnknownElementsAndPropertiesAreSkipped) {
   for (int i = 0; i < 3; ++i) out.put<std::int32_t>(i).put<std::int32_t>((i + 1) % 3);
   write_bytes(dir / "unknown_binary.ply", "ply\nformat binary_little_endian 1.0\n" + header_body + out.data);
   expect_same_mesh(from_ascii, read_mesh(dir / "unknown_binary.ply"));
+}
+
+// Texture coordinates per face corner, as MeshLab writes a textured mesh: each vertex takes those of the
+// first corner that references it, whatever the layout (before or after the index list, faces before the
+// vertices, binary or ascii), in core; a reader that hands its vertices on as it loads them says it left
+// them out.
+TEST(PlyLayout, PerCornerTextureCoordinatesGoToTheirVertices) {
+  test::TempDir dir;
+  // A unit square as two triangles with a uv seam along its diagonal: vertex 0 is used by the first
+  // triangle with (0, 0) and by the second with (0.5, 0.5); vertex 4 is used by no face.
+  const float xyz[5][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {5, 5, 5}};
+  const Triangle faces[2] = {{0, 1, 2}, {0, 2, 3}};
+  const float uv[2][6] = {{0, 0, 1, 0, 1, 1}, {0.5f, 0.5f, 0.75f, 0.75f, 0, 1}};
+  const std::vector<Vec2f> expected = {{0, 0}, {1, 0}, {1, 1}, {0, 1}, {0, 0}};
+  for (bool texcoord_first : {false, true}) {
+    for (bool faces_first : {false, true}) {
+      const std::string vertex_element =
+          "element vertex 5\nproperty float x\nproperty float y\nproperty float z\n";
+      const std::string face_element =
+          "element face 2\n" +
+          std::string(texcoord_first ? "property list uchar float texcoord\nproperty list uchar int "
+                                       "vertex_indices\n"
+                                     : "property list uchar int vertex_indices\nproperty list uchar float "
+                                       "texcoord\n") +
+          "property int texnumber\n";
+      const std::string elements =
+          faces_first ? face_element + vertex_element : vertex_element + face_element;
+      std::string ascii_vertices, ascii_faces;
+      Bytes binary_vertices, binary_faces;
+      for (const auto& p : xyz) {
+        ascii_vertices +=
+            std::to_string(p[0]) + " " + std::to_string(p[1]) + " " + std::to_string(p[2]) + "\n";
+        binary_vertices.put(p[0]).put(p[1]).put(p[2]);
+      }
+      for (int f = 0; f < 2; ++f) {
+        std::string indices = "3", coords = "6";
+        Bytes index_bytes, coord_bytes;
+        index_bytes.put<std::uint8_t>(3);
+        coord_bytes.put<std::uint8_t>(6);
+        for (Index v : faces[f]) {
+          indices.append(" ").append(std::to_string(v));
+          index_bytes.put(static_cast<std::int32_t>(v));
+        }
+        for (float c : uv[f]) {
+          coords.append(" ").append(std::to_string(c));
+          coord_bytes.put(c);
+        }
+        ascii_faces += (texcoord_first ? coords + " " + indices : indices + " " + coords) + " 0\n";
+        binary_faces.data +=
+            texcoord_first ? coord_bytes.data + index_bytes.data : index_bytes.data + coord_bytes.data;
+        binary_faces.put<std::int32_t>(0);
+      }
+      for (bool ascii : {false, true}) {
+        SCOPED_TRACE(std::string(ascii ? "ascii" : "binary") + (faces_first ? ", faces first" : "") +
+                     (texcoord_first ? ", texcoord first" : ""));
+        const std::string body =
+            ascii ? (faces_first ? ascii_faces + ascii_vertices : ascii_vertices + ascii_faces)
+                  : (faces_first ? binary_faces.data + binary_vertices.data
+                                 : binary_vertices.data + binary_faces.data);
+        const std::string path = dir / "wedge.ply";
+        write_bytes(path, std::string("ply\nformat ") + (ascii ? "ascii" : "binary_little_endian") +
+                              " 1.0\n" + elements + "end_header\n" + body);
+        const IndexedMesh mesh = read_mesh(path);
+        EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{faces[0], faces[1]}));
+        ASSERT_TRUE(mesh.has_uvs());
+        EXPECT_EQ(mesh.uvs, expected);
+        // Streamed in batches of one, the same; its progress ends at its total, which counts the faces twice.
+        const Drained drained = drain(path, 1);
+        EXPECT_EQ(drained.triangles, mesh.triangles);
+        EXPECT_EQ(drained.vertices.uvs, expected);
+        ReadOptions sink;
+        sink.vertex_sink = [](const VertexChunk&) {};
+        EXPECT_EQ(open_triangle_stream(path, sink)->attributes_left_out(), "texture coordinates");
+        EXPECT_EQ(open_triangle_stream(path)->attributes_left_out(), "");
+      }
+    }
+  }
+  // Per-vertex texture coordinates, when the file has both, are the ones kept.
+  write_bytes(
+      dir / "both.ply",
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "property float u\nproperty float v\nelement face 1\nproperty list uchar int vertex_indices\n"
+      "property list uchar float texcoord\nend_header\n0 0 0 0.25 0.25\n1 0 0 0.5 0.25\n0 1 0 0.25 0.5\n"
+      "3 0 1 2 6 0 0 1 0 0 1\n");
+  EXPECT_EQ(read_mesh(dir / "both.ply").uvs,
+            (std::vector<Vec2f>{{0.25f, 0.25f}, {0.5f, 0.25f}, {0.25f, 0.5f}}));
 }
 
 // The face element before the vertex element: legal, and read with a second pass instead of buffering.
@@ -1060,6 +1146,8 @@ const Malformed kMalformed[] = {
     {"cr_line_endings.ply", "end in a carriage return alone"},
     {"binary_nan_normal.ply", "vertex 1 has a normal that is not a finite float"},
     {"ascii_inf_uv.ply", "vertex 2 has a texture coordinate that is not a finite float"},
+    {"ascii_texcoord_count.ply", "texcoord holds 4 numbers for 3 corners (two a corner) in record 1"},
+    {"ascii_texcoord_nan.ply", "a texture coordinate that is not a finite float in record 0"},
 };
 
 std::string malformed_path(const std::string& name) {

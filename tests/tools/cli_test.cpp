@@ -682,6 +682,56 @@ TEST(Cli, SimplifyAndLodKeepAPlysAttributesOutOfCoreAndSayWhenAnObjsAreDropped) 
   EXPECT_LT(attribute_fit(from_obj_mesh).color_error, reference.color_error + 5) << reference.color_error;
 }
 
+// A textured PLY as MeshLab writes it, with its texture coordinates per face corner (here u, v = x, y of the
+// corner's vertex): they reach the output through decimation and through clustering in core; out of core,
+// where the vertices are handed on before the faces are read, the run says they are left out.
+TEST(Cli, APlysPerCornerTextureCoordinatesReachTheOutput) {
+  test::TempDir dir;
+  const std::string scan = dir / "scan.ply", textured = dir / "textured.ply";
+  ASSERT_EQ(run("gen -q --triangles 40000 --seed 3 -o " + scan, dir).exit_code, 0);
+  const IndexedMesh mesh = read_mesh(scan);
+  {
+    std::ofstream out(textured, std::ios::binary);
+    out << "ply\nformat binary_little_endian 1.0\nelement vertex " << mesh.vertex_count()
+        << "\nproperty float x\nproperty float y\nproperty float z\nelement face " << mesh.face_count()
+        << "\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n";
+    out.write(reinterpret_cast<const char*>(mesh.positions.data()),
+              static_cast<std::streamsize>(mesh.positions.size() * sizeof(Vec3f)));
+    for (const Triangle& t : mesh.triangles) {
+      const std::uint8_t three = 3, six = 6;
+      out.write(reinterpret_cast<const char*>(&three), 1);
+      for (Index v : t) out.write(reinterpret_cast<const char*>(&v), 4);
+      out.write(reinterpret_cast<const char*>(&six), 1);
+      for (Index v : t) out.write(reinterpret_cast<const char*>(mesh.positions[v].data()), 8);
+    }
+  }
+  // The mean distance of each output vertex's uv from its own x, y; about 0.5 for uvs left at (0, 0), and
+  // output edges are about 0.08 long.
+  auto uv_error = [](const IndexedMesh& m) {
+    double sum = 0;
+    for (std::size_t v = 0; v < m.vertex_count(); ++v) sum += (m.uvs[v] - m.positions[v].head<2>()).norm();
+    return sum / static_cast<double>(m.vertex_count());
+  };
+  const std::string out = dir / "out.ply";
+  for (const std::string command : {"decimate", "cluster", "simplify"}) {
+    SCOPED_TRACE(command);
+    const std::string target = command == "cluster" ? " --grid 40" : " --faces 2000";
+    const CommandResult r = run(command + " -q " + textured + " -o " + out + target, dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.err, "");
+    const IndexedMesh result = read_mesh(out);
+    ASSERT_EQ(result.uvs.size(), result.vertex_count());
+    EXPECT_LT(uv_error(result), 0.02);  // measured: 0.005 to 0.007
+  }
+  const CommandResult limited =
+      run("simplify -q " + textured + " -o " + out + " --faces 100 --memory-limit 10000", dir);
+  EXPECT_EQ(limited.exit_code, 0) << limited.err;
+  EXPECT_NE(limited.err.find("textured.ply: its texture coordinates are not in the output"),
+            std::string::npos)
+      << limited.err;
+  EXPECT_TRUE(read_mesh(out).uvs.empty());
+}
+
 // cluster holds its input's vertex array only up to --memory-limit (a third of RAM by default); past it the
 // faces are dereferenced on disk and clustered as soups, to the same cells: same counts, the colors kept,
 // and distances to the original within a hair of the in-core run's.

@@ -360,9 +360,9 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
 
 std::string attributes_left_out_warning(const std::string& left_out) {
   return "its " + left_out +
-         " are not in the output: past the memory limit an OBJ's faces are read from disk with their "
-         "positions, and with vertex colors when its first 65,536 vertices have some; normals and texture "
-         "coordinates, which it indexes per corner, are left out (a PLY keeps them all)";
+         " are not in the output: past the memory limit the faces are read from disk with their vertices' "
+         "attributes, but not those a file gives per face corner (an OBJ's normals and texture coordinates, "
+         "a PLY's texcoord lists), and an OBJ's vertex colors only when its first 65,536 vertices have some";
 }
 
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
