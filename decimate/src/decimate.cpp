@@ -45,6 +45,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
@@ -197,6 +198,30 @@ void parallel_chunks(std::size_t n, std::size_t grain, const Body& body) {
   const std::size_t chunks = (n + grain - 1) / grain;
   tbb::parallel_for(std::size_t{0}, chunks,
                     [&](std::size_t k) { body(k * grain, std::min(n, (k + 1) * grain)); });
+}
+
+// Numbers the i in [0, n) for which keep(i) holds, in order: out[i] is i's rank among them, or kNone. Returns
+// how many there are. Chunks count, then number from their prefix, so the numbering is the serial one.
+template <class Keep>
+Index number_kept(std::size_t n, Index* out, const Keep& keep) {
+  constexpr std::size_t grain = 16384;
+  const std::size_t chunks = (n + grain - 1) / grain;
+  std::vector<Index> first(chunks + 1, 0);
+  parallel_chunks(n, grain, [&](std::size_t begin, std::size_t end) {
+    Index kept = 0;
+    for (std::size_t i = begin; i < end; ++i) {
+      const bool k = keep(i);
+      out[i] = k;
+      kept += k;
+    }
+    first[begin / grain + 1] = kept;
+  });
+  for (std::size_t c = 0; c < chunks; ++c) first[c + 1] += first[c];
+  parallel_chunks(n, grain, [&](std::size_t begin, std::size_t end) {
+    Index next = first[begin / grain];
+    for (std::size_t i = begin; i < end; ++i) out[i] = out[i] ? next++ : kNone;
+  });
+  return first[chunks];
 }
 
 // Sorts a short list in place (neighbour lists have a handful of entries).
@@ -1260,54 +1285,66 @@ struct Decimator {
     // reads were about two thirds of this function's time. New edge ids go in `vf` (rebuilt below; it has
     // room, as every edge was found in a face).
     std::vector<Index> id(nv);
-    Index nv_new = 0;
-    for (std::size_t v = 0; v < nv; ++v) id[v] = verts[v].live_faces > 0 ? nv_new++ : kNone;
+    const Index nv_new = number_kept(nv, id.data(), [&](std::size_t v) { return verts[v].live_faces > 0; });
     // An edge lives only while a face holds both its ends; be safe anyway about ends left without faces.
-    for (std::size_t e = 0; e < ne; ++e) {
-      const Edge& edge = edges[e];
-      if (edge.slot != kDead && (id[edge.v[0]] == kNone || id[edge.v[1]] == kNone))
-        kill(static_cast<Index>(e));
+    constexpr std::size_t grain = 65536;
+    std::vector<std::vector<Index>> stray((ne + grain - 1) / grain);
+    parallel_chunks(ne, grain, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e) {
+        const Edge& edge = edges[e];
+        if (edge.slot != kDead && (id[edge.v[0]] == kNone || id[edge.v[1]] == kNone))
+          stray[begin / grain].push_back(static_cast<Index>(e));
+      }
+    });
+    for (const std::vector<Index>& chunk : stray) {
+      for (Index e : chunk) kill(e);
     }
     if (vf.size() < ne) vf.resize(ne);
-    Index ne_new = 0;
-    for (std::size_t e = 0; e < ne; ++e) {
-      const Edge edge = edges[e];
-      if (edge.slot == kDead) {
-        vf[e] = kNone;
-        continue;
-      }
-      vf[e] = ne_new;
-      edges[ne_new] = {{id[edge.v[0]], id[edge.v[1]]}, edge.slot};
-      if (edge.slot < first_state) heap.rename(edge.slot, ne_new);
-      ++ne_new;
-    }
-    for (std::vector<Index>* list : {&blocked, &deferred}) {
-      std::size_t kept = 0;
-      for (Index e : *list) {
-        if (vf[e] != kNone) (*list)[kept++] = vf[e];
-      }
-      list->resize(kept);
-    }
+    const Index ne_new = number_kept(ne, vf.data(), [&](std::size_t e) { return edges[e].slot != kDead; });
     Index nf_new = 0;
-    for (std::size_t f = 0; f < nf; ++f) {
-      const Face& t = faces[f];
-      if (t.v[0] == kNone) continue;
-      faces[nf_new++] = {{id[t.v[0]], id[t.v[1]], id[t.v[2]]},
-                         {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
-                         {t.ref[0], t.ref[1]},
-                         t.floor2};
-    }
-    for (std::size_t v = 0; v < nv; ++v) {
-      const Index to = id[v];
-      if (to == kNone) continue;
-      verts[to] = verts[v];
-      Vertex& x = verts[to];
-      x.stamp = 0;
-      x.seg_next = to;
-      if (!normals.empty()) normals[to] = normals[v];
-      if (!colors.empty()) colors[to] = colors[v];
-      if (!uvs.empty()) uvs[to] = uvs[v];
-    }
+    // Each array moves down in place, in order (a record's new place is never after its old one), so each
+    // move is one serial loop; the three arrays move side by side. On a 1 M-triangle scan the first
+    // compaction took 21 ms serially, about 5 % of the decimation's time.
+    tbb::parallel_invoke(
+        [&] {
+          for (std::size_t e = 0; e < ne; ++e) {
+            const Index to = vf[e];
+            if (to == kNone) continue;
+            const Edge edge = edges[e];
+            edges[to] = {{id[edge.v[0]], id[edge.v[1]]}, edge.slot};
+            if (edge.slot < first_state) heap.rename(edge.slot, to);
+          }
+          for (std::vector<Index>* list : {&blocked, &deferred}) {
+            std::size_t kept = 0;
+            for (Index e : *list) {
+              if (vf[e] != kNone) (*list)[kept++] = vf[e];
+            }
+            list->resize(kept);
+          }
+        },
+        [&] {
+          for (std::size_t f = 0; f < nf; ++f) {
+            const Face& t = faces[f];
+            if (t.v[0] == kNone) continue;
+            faces[nf_new++] = {{id[t.v[0]], id[t.v[1]], id[t.v[2]]},
+                               {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
+                               {t.ref[0], t.ref[1]},
+                               t.floor2};
+          }
+        },
+        [&] {
+          for (std::size_t v = 0; v < nv; ++v) {
+            const Index to = id[v];
+            if (to == kNone) continue;
+            verts[to] = verts[v];
+            Vertex& x = verts[to];
+            x.stamp = 0;
+            x.seg_next = to;
+            if (!normals.empty()) normals[to] = normals[v];
+            if (!colors.empty()) colors[to] = colors[v];
+            if (!uvs.empty()) uvs[to] = uvs[v];
+          }
+        });
     stamp_now = 0;
     staged_edge = kNone;
     verts.resize(nv_new);
@@ -2510,7 +2547,7 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   }
   d.target_v = options.target_vertices;
   arena.execute([&] { d.start(); });
-  d.run();
+  arena.execute([&] { d.run(); });  // its compactions run in parallel
   d.explain();
   DecimateResult result;
   result.mesh = d.output(options.output_quadrics ? &result.quadrics : nullptr);
