@@ -31,6 +31,27 @@ std::uint64_t ply_triangles_hint(const std::string& path);
 std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, FileFormat format,
                                                    const ReadOptions& options);
 
+// What ReadOptions::warn is told when face corners gave vertices different texture coordinates
+// (`uv_seam_vertices` of them) or normals (`hard_edge_vertices`); empty when neither.
+inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint64_t hard_edge_vertices) {
+  auto vertices = [](std::uint64_t n, const char* where) {
+    return std::to_string(n) + (n == 1 ? " vertex " : " vertices ") + where +
+           (n == 1 ? " keeps its" : " keep their");
+  };
+  std::string note;
+  if (uv_seam_vertices > 0) {
+    note =
+        vertices(uv_seam_vertices, "on texture seams (face corners giving different texture coordinates)") +
+        " first corner's, so the texture smears along those seams";
+  }
+  if (hard_edge_vertices > 0) {
+    note += (note.empty() ? "" : "; ") +
+            vertices(hard_edge_vertices, "on hard edges (face corners giving different normals)") +
+            " first corner's normal";
+  }
+  return note;
+}
+
 // "normals, colors and texture coordinates", or the part of it that is true (see
 // TriangleStream::attributes_left_out).
 inline std::string attribute_list(bool normals, bool colors, bool uvs) {

@@ -75,6 +75,7 @@ class ObjStream final : public TriangleStream {
         lines_(reader_),
         capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
         progress_(options.progress),
+        warn_(options.warn),
         vertex_sink_(options.vertex_sink) {
     try {
       load_records();
@@ -391,9 +392,11 @@ class ObjStream final : public TriangleStream {
   }
 
   // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn.
+  // Vertices whose later corners disagree are counted (state 2) for ReadOptions::warn.
   void assign_attributes() {
     const std::size_t n = vertices_.positions.size();
     std::vector<std::uint8_t> has_uv, has_normal;
+    std::uint64_t uv_seams = 0, hard_edges = 0;
     std::string_view line;
     while (next_statement(line)) {
       const char* rest;
@@ -418,6 +421,9 @@ class ObjStream final : public TriangleStream {
               if (!has_uv[c.v]) {
                 has_uv[c.v] = 1;
                 vertices_.uvs[c.v] = uv_records_[c.vt];
+              } else if (has_uv[c.v] == 1 && vertices_.uvs[c.v] != uv_records_[c.vt]) {
+                has_uv[c.v] = 2;
+                ++uv_seams;
               }
             }
             if (c.vn != kNone) {
@@ -428,6 +434,9 @@ class ObjStream final : public TriangleStream {
               if (!has_normal[c.v]) {
                 has_normal[c.v] = 1;
                 vertices_.normals[c.v] = normal_records_[c.vn];
+              } else if (has_normal[c.v] == 1 && vertices_.normals[c.v] != normal_records_[c.vn]) {
+                has_normal[c.v] = 2;
+                ++hard_edges;
               }
             }
           }
@@ -439,12 +448,14 @@ class ObjStream final : public TriangleStream {
     }
     uv_records_ = {};
     normal_records_ = {};
+    if (warn_ && uv_seams + hard_edges > 0) warn_(merged_corners_note(uv_seams, hard_edges));
   }
 
   ByteReader reader_;
   LineReader lines_;
   std::size_t capacity_;
   ProgressFn progress_;
+  std::function<void(const std::string&)> warn_;
   // Out of core (ReadOptions::vertex_sink): positions and colors go there a chunk at a time; no vertex array
   // is kept.
   std::function<void(const VertexChunk&)> vertex_sink_;

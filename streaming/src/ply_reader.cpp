@@ -390,6 +390,7 @@ class PlyStream final : public TriangleStream {
 
   detail::ByteReader reader_;
   ProgressFn progress_;
+  std::function<void(const std::string&)> warn_;
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
   // the start: the origin stays zero.
@@ -468,6 +469,7 @@ class PlyStream final : public TriangleStream {
 PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     : reader_(path, kBufferBytes),
       progress_(options.progress),
+      warn_(options.warn),
       vertex_sink_(options.vertex_sink),
       capacity_(std::max<std::size_t>(options.batch_capacity, 1)) {
   header_ = parse_ply_header(reader_);
@@ -1276,7 +1278,9 @@ void PlyStream::load_wedge_uvs() {
   current_element_ = face_element_;
   current_record_ = 0;
   vertices_.uvs.assign(vertices_.positions.size(), Vec2f::Zero());
-  std::vector<bool> given(vertices_.positions.size(), false);
+  // Per vertex: 0 no corner yet, 1 given, 2 given and a later corner disagreed (counted for warn_).
+  std::vector<std::uint8_t> given(vertices_.positions.size(), 0);
+  std::uint64_t seams = 0;
   // One face's lists; they grow with the values actually read, never with a count the file claims.
   std::vector<std::int64_t> corners;
   std::vector<float> uv;
@@ -1317,13 +1321,19 @@ void PlyStream::load_wedge_uvs() {
     }
     for (std::size_t k = 0; k < corners.size() && !uv.empty(); ++k) {
       const auto v = static_cast<std::size_t>(corners[k]);
-      if (given[v]) continue;
-      given[v] = true;
-      vertices_.uvs[v] = Vec2f(uv[2 * k], uv[2 * k + 1]);
+      const Vec2f corner(uv[2 * k], uv[2 * k + 1]);
+      if (given[v] == 0) {
+        given[v] = 1;
+        vertices_.uvs[v] = corner;
+      } else if (given[v] == 1 && vertices_.uvs[v] != corner) {
+        given[v] = 2;
+        ++seams;
+      }
     }
     end_record();
     if ((current_record_ & 0xfff) == 0) report_progress();
   }
+  if (warn_ && seams > 0) warn_(merged_corners_note(seams, 0));
 }
 
 // Records of a count followed by the indices, nothing else, while the count is 3.

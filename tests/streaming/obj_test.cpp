@@ -93,6 +93,36 @@ TEST(Obj, FirstCornerWinsOnSeams) {
   EXPECT_EQ(m.uvs, (std::vector<Vec2f>{{0, 0}, {1, 0}, {0, 1}}));
 }
 
+// The vertices whose corners disagree are counted once each, by value (two vt records of the same value do
+// not make a seam), and told through ReadOptions::warn in one message; a file whose corners agree says
+// nothing.
+TEST(Obj, SaysHowManyVerticesItsCornersDisagreeOn) {
+  TempDir dir;
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  test::write_file_bytes(
+      dir / "seams.obj",
+      "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.5\nvt 0 0\n"
+      "vt 1 1\nvn 0 0 1\nvn 0 1 0\n"
+      "f 1/1/1 2/2/1 3/3/1\nf 1/4/2 3/4/1 2/4/1\nf 2/2/1 4/6/1 3/3/1\nf 1/5/2 2/2/1 4/6/1\n");
+  const IndexedMesh m = read_mesh(dir / "seams.obj", options);
+  EXPECT_EQ(m.uvs, (std::vector<Vec2f>{{0, 0}, {1, 0}, {0, 1}, {1, 1}}));
+  EXPECT_EQ(m.normals[0], Vec3f(0, 0, 1));
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_EQ(
+      told[0],
+      "3 vertices on texture seams (face corners giving different texture coordinates) keep their first "
+      "corner's, so the texture smears along those seams; 1 vertex on hard edges (face corners giving "
+      "different normals) keeps its first corner's normal");
+  told.clear();
+  test::write_file_bytes(dir / "agreeing.obj",
+                         "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0 0\n"
+                         "f 1/1 2/2 3/3\nf 1/4 3/3 2/2\n");
+  EXPECT_EQ(read_mesh(dir / "agreeing.obj", options).uvs, (std::vector<Vec2f>{{0, 0}, {1, 0}, {0, 1}}));
+  EXPECT_TRUE(told.empty()) << told[0];
+}
+
 TEST(Obj, NegativeIndicesCountBackFromTheLine) {
   TempDir dir;
   const IndexedMesh m = read_text(dir,
@@ -303,15 +333,28 @@ TEST(ObjShared, SpotTakesEachPositionsUvFromItsFirstCorner) {
       }
     }
   }
-  std::vector<bool> seen(m.vertex_count(), false);
-  std::size_t checked = 0;
+  std::vector<bool> seen(m.vertex_count(), false), seam(m.vertex_count(), false);
+  std::size_t checked = 0, seams = 0;
   for (auto [v, t] : corners) {
-    if (seen[v]) continue;
+    if (seen[v]) {
+      if (!seam[v] && vt[t] != m.uvs[v]) {
+        seam[v] = true;
+        ++seams;
+      }
+      continue;
+    }
     seen[v] = true;
     ASSERT_EQ(m.uvs[v], vt[t]) << "vertex " << v;
     ++checked;
   }
   EXPECT_EQ(checked, m.vertex_count());
+  // The warning counts the same vertices on seams.
+  ASSERT_GT(seams, 0u);
+  std::string told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told += message; };
+  read_mesh(path, options);
+  EXPECT_EQ(told.rfind(std::to_string(seams) + " vertices on texture seams", 0), 0u) << told;
   const MeshTopology topology = analyze_topology(m);
   EXPECT_EQ(topology.boundary_edges, 0u);  // uv seams split attributes, never positions
   EXPECT_EQ(topology.unreferenced_vertices, 0u);

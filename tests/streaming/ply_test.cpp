@@ -876,7 +876,13 @@ TEST(PlyLayout, PerCornerTextureCoordinatesGoToTheirVertices) {
         const std::string path = dir / "wedge.ply";
         write_bytes(path, std::string("ply\nformat ") + (ascii ? "ascii" : "binary_little_endian") +
                               " 1.0\n" + elements + "end_header\n" + body);
-        const IndexedMesh mesh = read_mesh(path);
+        std::vector<std::string> told;
+        ReadOptions options;
+        options.warn = [&](const std::string& message) { told.push_back(message); };
+        const IndexedMesh mesh = read_mesh(path, options);
+        // Vertices 0 and 2 are on the seam.
+        ASSERT_EQ(told.size(), 1u);
+        EXPECT_EQ(told[0].rfind("2 vertices on texture seams", 0), 0u) << told[0];
         EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{faces[0], faces[1]}));
         ASSERT_TRUE(mesh.has_uvs());
         EXPECT_EQ(mesh.uvs, expected);

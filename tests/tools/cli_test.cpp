@@ -732,6 +732,29 @@ TEST(Cli, APlysPerCornerTextureCoordinatesReachTheOutput) {
   EXPECT_TRUE(read_mesh(out).uvs.empty());
 }
 
+// Where face corners disagree on a vertex's texture coordinates or normal, every command that reads the file
+// says so in one warning line (a mesh here holds one of each per vertex), and still succeeds.
+TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
+  test::TempDir dir;
+  const std::string obj = dir / "seam.obj";
+  std::ofstream(obj)
+      << ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.5 0.5\n"
+          "f 1/1 2/2 3/3\nf 1/5 3/3 4/4\n");
+  for (const std::string& command : {"info " + obj, "convert -q " + obj + " " + (dir / "c.ply"),
+                                     "decimate -q " + obj + " -o " + (dir / "d.ply") + " --faces 1",
+                                     "cluster -q " + obj + " -o " + (dir / "k.ply") + " --grid 4",
+                                     "simplify -q " + obj + " -o " + (dir / "s.ply") + " --faces 1",
+                                     "lod -q " + obj + " -o " + (dir / "l.ply") + " --faces 1"}) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 0) << command << ": " << r.err;
+    EXPECT_EQ(r.err,
+              "ocsimp: warning: " + obj +
+                  ": 1 vertex on texture seams (face corners giving different texture coordinates) keeps its "
+                  "first corner's, so the texture smears along those seams\n")
+        << command;
+  }
+}
+
 // cluster holds its input's vertex array only up to --memory-limit (a third of RAM by default); past it the
 // faces are dereferenced on disk and clustered as soups, to the same cells: same counts, the colors kept,
 // and distances to the original within a hair of the in-core run's.

@@ -87,6 +87,7 @@ void add_cluster_command(CLI::App& app) {
 
     ReadOptions read;
     read.progress = progress;
+    read.warn = console.warn;
     read.memory_budget =
         effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit));
     std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);

@@ -28,8 +28,10 @@ void add_convert_command(CLI::App& app) {
     // At peak on gen 4 M: 20 bytes a face to PLY, OBJ or STL, 113 to Draco (its encoder's tables).
     check_whole_mesh_fits({flags->input}, to == FileFormat::drc ? 100 : 16, "convert holds the whole mesh",
                           "");
+    const Console console = make_console(flags->quiet, flags->input);
     ReadOptions read;
-    read.progress = make_progress(flags->quiet);
+    read.progress = console.progress;
+    read.warn = console.warn;
     read.faces_required = false;  // a mesh without faces converts too, with write_result's warning
     flags->write.progress = read.progress;
     write_result(flags->output, read_mesh(flags->input, read), flags->write);

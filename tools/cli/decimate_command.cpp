@@ -77,7 +77,8 @@ void add_decimate_command(CLI::App& app) {
         !(options.max_error < std::numeric_limits<double>::infinity())) {
       throw Error("decimate needs --faces N, --vertices N, --ratio R or a finite --max-error E");
     }
-    const ProgressFn progress = make_progress(flags->quiet);
+    const Console console = make_console(flags->quiet, flags->input);
+    const ProgressFn& progress = console.progress;
     options.progress = progress;
 
     // 144 bytes a face at peak on gen 4 M.
@@ -85,6 +86,7 @@ void add_decimate_command(CLI::App& app) {
                           "ocsimp simplify takes any size within --memory-limit, clustering first");
     ReadOptions read;
     read.progress = progress;
+    read.warn = console.warn;
     QuadricMesh input;
     input.mesh = read_mesh(flags->input, read);
     const double read_seconds = seconds_since(start);

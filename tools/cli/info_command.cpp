@@ -22,6 +22,7 @@ void add_info_command(CLI::App& app) {
     check_whole_mesh_fits({*input}, 95, "info holds the whole mesh and its edges", "");
     ReadOptions read;
     read.faces_required = false;
+    read.warn = make_console(true, *input).warn;
     const IndexedMesh mesh = read_mesh(*input, read);
     const MeshTopology topo = analyze_topology(mesh);
     Box3 box = mesh.bounds();  // in the file's coordinates

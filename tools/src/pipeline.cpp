@@ -160,6 +160,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   auto start = Clock::now();
   ReadOptions read;
   read.progress = options.progress;
+  read.warn = options.warn;
   read.memory_budget = vertex_allowance(input_path, options, budget);
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
   const double fine_per_vertex = options.cluster.fine_cells_per_target;

@@ -48,6 +48,10 @@ struct ReadOptions {
   // chunk at a time, and keeps no vertex array; next() still yields indices into the file's vertices and
   // checks them against the file's vertex count. Other readers ignore it.
   std::function<void(const VertexChunk& chunk)> vertex_sink;
+  // Told, once per file and without stopping the read, what the reader had to approximate: vertices whose
+  // face corners give them different texture coordinates or normals (uv seams, hard edges) keep their first
+  // corner's, as a mesh here holds one of each per vertex.
+  std::function<void(const std::string& message)> warn;
   // Whether read_mesh refuses a file without faces (a PLY's empty face element says so at its header line).
   // `info` and `convert` read them: ocsimp writes one when every triangle of a clustering collapses.
   bool faces_required = true;
