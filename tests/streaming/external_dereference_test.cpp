@@ -261,6 +261,34 @@ TEST(ExternalDereference, OpenTriangleStreamChoosesByTheBudget) {
   EXPECT_FALSE(dereferenced_out_of_core(*open_triangle_stream(with_attributes, options)));
   options.memory_budget = 441 * 28 - 1;
   EXPECT_TRUE(dereferenced_out_of_core(*open_triangle_stream(with_attributes, options)));
+
+  // Texture coordinates per face corner are judged as an OBJ's are: the budget is for what the out-of-core
+  // reader would hold (the positions), and a file whose positions fit is read in core, where its corners'
+  // uvs become the vertices' own (8 bytes a vertex more).
+  const IndexedMesh grid = shuffled_grid(20);
+  std::string ply =
+      "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(grid.vertex_count()) +
+      "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+      std::to_string(grid.face_count()) +
+      "\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n";
+  auto put = [&](const void* bytes, std::size_t n) { ply.append(static_cast<const char*>(bytes), n); };
+  for (const Vec3f& p : grid.positions) put(p.data(), 12);
+  for (const Triangle& t : grid.triangles) {
+    const std::uint8_t three = 3, six = 6;
+    put(&three, 1);
+    put(t.data(), 12);
+    put(&six, 1);
+    for (Index v : t) put(grid.positions[v].data(), 8);
+  }
+  const std::string textured = dir / "textured.ply";
+  test::write_file_bytes(textured, ply);
+  options.memory_budget = 441 * 12;
+  EXPECT_FALSE(dereferenced_out_of_core(*open_triangle_stream(textured, options)));
+  EXPECT_TRUE(open_triangle_stream(textured, options)->vertices().has_uvs());
+  options.memory_budget = 441 * 12 - 1;
+  const auto out_of_core = open_triangle_stream(textured, options);
+  EXPECT_TRUE(dereferenced_out_of_core(*out_of_core));
+  EXPECT_EQ(out_of_core->attributes_left_out(), "texture coordinates");
 }
 
 TEST(ExternalDereference, BadInputGivesTheReadersErrorAndLeavesNothing) {
