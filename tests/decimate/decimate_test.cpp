@@ -1130,6 +1130,30 @@ TEST(Decimate, FirstPhaseMeetsExactCounts) {
   }
 }
 
+// A collapse among doubled faces removes four of them: the first phase's second pass used to take its share
+// from the collapses done, not from the faces left, and went far below the target (a sixth of the faces on
+// a scan with a tenth of them doubled).
+TEST(Decimate, FirstPhaseMeetsExactCountsAmongDoubledFaces) {
+  IndexedMesh doubled =
+      height_field(120, [](double x, double y) { return 0.1 * std::sin(6 * x) * std::cos(5 * y); });
+  ASSERT_EQ(doubled.face_count(), 28800u);
+  std::uint32_t state = 12345;  // a fixed pseudo-random tenth of the faces, doubled
+  for (std::size_t f = 0; f < 28800; ++f) {
+    state = state * 1664525u + 1013904223u;
+    if (state % 10 == 0) doubled.triangles.push_back(doubled.triangles[f]);
+  }
+  const std::uint64_t input = doubled.face_count();
+  ASSERT_GT(input, 28800u + 2000u);
+  for (std::uint64_t target : {input / 10, input / 100}) {
+    const DecimateResult r = run(doubled, faces(target));
+    EXPECT_EQ(r.mesh.face_count(), target) << "target " << target;
+    EXPECT_EQ(r.stats.stop, DecimateStop::target_reached);
+  }
+  DecimateOptions o;
+  o.target_vertices = 500;
+  EXPECT_EQ(run(doubled, o).mesh.vertex_count(), 500u);
+}
+
 TEST(Decimate, FirstPhaseKeepsASphereOnTheSphere) {
   const IndexedMesh sphere = test::sphere(7);  // 131072 faces
   const DecimateResult r = run(sphere, faces(2000));
