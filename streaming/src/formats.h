@@ -31,6 +31,21 @@ std::uint64_t ply_triangles_hint(const std::string& path);
 std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, FileFormat format,
                                                    const ReadOptions& options);
 
+// Per-corner attributes onto vertices, which hold one each: vertex v takes the value of the first corner that
+// references it. `state` (one entry per vertex, 0 at first) records that it has one (1) and whether a later
+// corner disagreed (2); each vertex that disagrees adds one to `disagreeing`, once.
+template <class T>
+void take_first_corner(std::vector<std::uint8_t>& state, std::vector<T>& values, std::size_t v,
+                       const T& value, std::uint64_t& disagreeing) {
+  if (state[v] == 0) {
+    state[v] = 1;
+    values[v] = value;
+  } else if (state[v] == 1 && values[v] != value) {
+    state[v] = 2;
+    ++disagreeing;
+  }
+}
+
 // What ReadOptions::warn is told when face corners gave vertices different texture coordinates
 // (`uv_seam_vertices` of them) or normals (`hard_edge_vertices`); empty when neither.
 inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint64_t hard_edge_vertices) {

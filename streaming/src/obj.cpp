@@ -391,8 +391,8 @@ class ObjStream final : public TriangleStream {
     sink_colors_buffer_.clear();
   }
 
-  // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn.
-  // Vertices whose later corners disagree are counted (state 2) for ReadOptions::warn.
+  // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn;
+  // those whose later corners disagree are counted for ReadOptions::warn.
   void assign_attributes() {
     const std::size_t n = vertices_.positions.size();
     std::vector<std::uint8_t> has_uv, has_normal;
@@ -418,26 +418,14 @@ class ObjStream final : public TriangleStream {
                 has_uv.assign(n, 0);
                 vertices_.uvs.assign(n, Vec2f::Zero());
               }
-              if (!has_uv[c.v]) {
-                has_uv[c.v] = 1;
-                vertices_.uvs[c.v] = uv_records_[c.vt];
-              } else if (has_uv[c.v] == 1 && vertices_.uvs[c.v] != uv_records_[c.vt]) {
-                has_uv[c.v] = 2;
-                ++uv_seams;
-              }
+              take_first_corner(has_uv, vertices_.uvs, c.v, uv_records_[c.vt], uv_seams);
             }
             if (c.vn != kNone) {
               if (has_normal.empty()) {
                 has_normal.assign(n, 0);
                 vertices_.normals.assign(n, Vec3f::Zero());
               }
-              if (!has_normal[c.v]) {
-                has_normal[c.v] = 1;
-                vertices_.normals[c.v] = normal_records_[c.vn];
-              } else if (has_normal[c.v] == 1 && vertices_.normals[c.v] != normal_records_[c.vn]) {
-                has_normal[c.v] = 2;
-                ++hard_edges;
-              }
+              take_first_corner(has_normal, vertices_.normals, c.v, normal_records_[c.vn], hard_edges);
             }
           }
           break;

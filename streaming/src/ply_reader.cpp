@@ -1278,8 +1278,7 @@ void PlyStream::load_wedge_uvs() {
   current_element_ = face_element_;
   current_record_ = 0;
   vertices_.uvs.assign(vertices_.positions.size(), Vec2f::Zero());
-  // Per vertex: 0 no corner yet, 1 given, 2 given and a later corner disagreed (counted for warn_).
-  std::vector<std::uint8_t> given(vertices_.positions.size(), 0);
+  std::vector<std::uint8_t> given(vertices_.positions.size(), 0);  // see take_first_corner
   std::uint64_t seams = 0;
   // One face's lists; they grow with the values actually read, never with a count the file claims.
   std::vector<std::int64_t> corners;
@@ -1320,15 +1319,8 @@ void PlyStream::load_wedge_uvs() {
       fail_at_byte(uv_offset, reason);
     }
     for (std::size_t k = 0; k < corners.size() && !uv.empty(); ++k) {
-      const auto v = static_cast<std::size_t>(corners[k]);
-      const Vec2f corner(uv[2 * k], uv[2 * k + 1]);
-      if (given[v] == 0) {
-        given[v] = 1;
-        vertices_.uvs[v] = corner;
-      } else if (given[v] == 1 && vertices_.uvs[v] != corner) {
-        given[v] = 2;
-        ++seams;
-      }
+      take_first_corner(given, vertices_.uvs, static_cast<std::size_t>(corners[k]),
+                        Vec2f(uv[2 * k], uv[2 * k + 1]), seams);
     }
     end_record();
     if ((current_record_ & 0xfff) == 0) report_progress();
