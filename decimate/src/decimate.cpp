@@ -1212,31 +1212,19 @@ struct Decimator {
     return (target_f > 0 && faces_alive <= target_f) || (target_v > 0 && verts_alive <= target_v);
   }
 
-  // The collapses the count targets ask for (one removes about one vertex and two faces); infinite when
-  // there is none.
-  double collapses_needed() const {
+  // The collapses the count targets ask for of a mesh of `faces` and `vertices` (one removes about one
+  // vertex and two faces); infinite when there is none.
+  double collapses_to_targets(std::uint64_t faces, std::uint64_t vertices) const {
     double needed = std::numeric_limits<double>::infinity();
-    if (target_f > 0) {
-      needed =
-          std::min(needed, stats.input_faces > target_f ? double(stats.input_faces - target_f) / 2 : 0.0);
-    }
-    if (target_v > 0) {
-      needed =
-          std::min(needed, stats.input_vertices > target_v ? double(stats.input_vertices - target_v) : 0.0);
-    }
+    if (target_f > 0) needed = std::min(needed, faces > target_f ? double(faces - target_f) / 2 : 0.0);
+    if (target_v > 0) needed = std::min(needed, vertices > target_v ? double(vertices - target_v) : 0.0);
     return needed;
   }
-  // The same for what the targets still ask for, from the live counts (see run_pass: with a tenth of its
-  // faces doubled, a scan lost a further sixth of its faces below the target when only the collapses done
-  // were counted).
-  double collapses_still_needed() const {
-    double needed = std::numeric_limits<double>::infinity();
-    if (target_f > 0)
-      needed = std::min(needed, faces_alive > target_f ? double(faces_alive - target_f) / 2 : 0.0);
-    if (target_v > 0)
-      needed = std::min(needed, verts_alive > target_v ? double(verts_alive - target_v) : 0.0);
-    return needed;
-  }
+  // Of the input, in all.
+  double collapses_needed() const { return collapses_to_targets(stats.input_faces, stats.input_vertices); }
+  // Of the live counts: what the targets still ask for (see run_pass: with a tenth of its faces doubled, a
+  // scan lost a further sixth of its faces below the target when only the collapses done were counted).
+  double collapses_still_needed() const { return collapses_to_targets(faces_alive, verts_alive); }
   std::uint64_t expected_collapses() const {
     const double needed = collapses_needed();
     return needed < std::numeric_limits<double>::infinity() ? static_cast<std::uint64_t>(needed) : 0;
