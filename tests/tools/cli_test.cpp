@@ -306,6 +306,16 @@ TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
   const CommandResult d = run("cluster -q " + stretched + " -o " + result, dir);
   EXPECT_EQ(d.exit_code, 0) << d.err;
   EXPECT_NE(d.err.find("of the 256 cells of the default --grid 256"), std::string::npos) << d.err;
+  // Every vertex at one point: one cell whatever the --grid, and no outlier to blame.
+  IndexedMesh point;
+  point.positions.assign(6, Vec3f(1, 2, 3));
+  point.triangles = {{0, 1, 2}, {3, 4, 5}};
+  const std::string one = dir / "point.ply";
+  write_mesh(one, point);
+  const CommandResult o = run("cluster -q --grid 8 " + one + " -o " + result, dir);
+  EXPECT_EQ(o.exit_code, 0) << o.err;
+  EXPECT_EQ(o.err.find("span"), std::string::npos) << o.err;
+  EXPECT_NE(o.err.find("has no faces"), std::string::npos) << o.err;
 }
 
 TEST(Cli, FailedConvertLeavesNothingBehind) {

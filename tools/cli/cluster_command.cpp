@@ -152,9 +152,11 @@ void add_cluster_command(CLI::App& app) {
       write_json_report(flags->report, report);
     }
     // A --grid counts cells along the bounding box of every vertex, used or not (the box is known before the
-    // faces are read); an outlier no face uses made bunny --grid 100 a single cell, without a word.
+    // faces are read); an outlier no face uses made bunny --grid 100 a single cell, without a word. Compared
+    // with the grid the pass used, not the one asked for: a box of one point is a single cell whatever the
+    // --grid, and no vertex stretches it.
     if (options.grid > 0 && !(options.cell_size > 0) && !options.octree && options.target_faces == 0 &&
-        2 * std::uint64_t{stats.spanned_cells} < options.grid) {
+        2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid) {
       std::fprintf(stderr,
                    "ocsimp: warning: the faces span only %u of the %u cells of %s %u: vertices no face "
                    "uses stretch the bounding box; --cell-size sets the cells' size directly\n",
