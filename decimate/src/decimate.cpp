@@ -297,6 +297,7 @@ struct Decimator {
   std::vector<Index> deferred, blocked;
 
   std::uint64_t faces_alive = 0, verts_alive = 0, boundary_edges = 0;
+  bool kept_last_faces = false;  // a collapse was put off as it would have removed every face left
   std::uint64_t target_f = 0, target_v = 0;
   std::uint64_t compact_below = 0;  // renumber when this few vertices are left (see compact)
 
@@ -1522,8 +1523,15 @@ struct Decimator {
     return false;
   }
 
-  // Whether a collapse removing kf faces and kv vertices stays within the count targets.
-  bool fits_targets(std::uint64_t kf, std::uint64_t kv, bool overshoot) const {
+  // Whether a collapse removing kf faces and kv vertices stays within the count targets. The last faces are
+  // never removed, whatever the targets: an error bound alone (a flat square at --max-error 1, a single
+  // triangle at cost 0 without border planes) or a vertex target below 3 took every face, and an empty mesh
+  // is no approximation of a surface.
+  bool fits_targets(std::uint64_t kf, std::uint64_t kv, bool overshoot) {
+    if (kf >= faces_alive) {
+      kept_last_faces = true;
+      return false;
+    }
     if (target_f > 0 && faces_alive - kf < target_f) {
       // One below is the best a closed manifold allows when one face is left to remove: every collapse
       // removes two unless it is on a boundary edge, and none is left. Once every other candidate is spent
@@ -2444,7 +2452,8 @@ struct Decimator {
       stats.reason = prefix + std::to_string(over) + " remaining candidates exceed the maximum error" +
                      (flip + topology + locked_pairs > 0
                           ? ", " + std::to_string(flip + topology + locked_pairs) + " are blocked by guards"
-                          : "");
+                          : "") +
+                     (kept_last_faces ? ", and the last faces are kept" : "");
       return;
     }
     if (over > 0 && flip + topology + locked_pairs + deferred_left == 0) {
@@ -2471,7 +2480,8 @@ struct Decimator {
     add(topology, "would break the link condition (--preserve-topology)");
     add(locked_pairs, "join two locked boundary vertices (--lock-boundary)");
     add(over, "exceed the maximum error");
-    add(deferred_left, "would overshoot the target");
+    add(deferred_left, kept_last_faces ? "would remove the last faces or overshoot the target"
+                                       : "would overshoot the target");
     stats.reason = prefix + "every remaining candidate is blocked: " + why;
   }
 

@@ -938,6 +938,32 @@ TEST(Decimate, MaxErrorIsHonoured) {
   EXPECT_FALSE(r.stats.target_reached);
 }
 
+// An error bound alone took every face: a unit square at --max-error 1 (its collapses cost 0.35) and a
+// single triangle without border planes (cost 0) both came out empty. So did a vertex target below three.
+TEST(Decimate, TheLastFaceIsNeverRemoved) {
+  auto expect_last_face = [](const DecimateResult& r, DecimateStop stop, const char* why) {
+    EXPECT_EQ(r.mesh.face_count(), 1u);
+    EXPECT_EQ(r.mesh.vertex_count(), 3u);
+    EXPECT_EQ(r.stats.stop, stop);
+    EXPECT_NE(r.stats.reason.find(why), std::string::npos) << r.stats.reason;
+  };
+  DecimateOptions loose;
+  loose.max_error = 1;
+  expect_last_face(run(test::grid_square(1), loose), DecimateStop::max_error, "the last faces are kept");
+
+  IndexedMesh triangle;
+  triangle.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  triangle.triangles = {{0, 1, 2}};
+  DecimateOptions exact;
+  exact.max_error = 0;
+  exact.boundary_weight = 0;
+  expect_last_face(run(triangle, exact), DecimateStop::max_error, "the last faces are kept");
+
+  DecimateOptions point;
+  point.target_vertices = 1;
+  expect_last_face(run(test::grid_square(4), point), DecimateStop::blocked, "would remove the last faces");
+}
+
 // ------------------------------------------------------------------ carried quadrics
 
 TEST(Decimate, CarriedQuadricsEqualToFacePlanesChangeNothing) {
