@@ -499,6 +499,18 @@ struct Decimator {
     if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
   }
 
+  // Of an edge's sides, the face of the one that has area when all the others have none; else kNone.
+  template <class Side>
+  Index only_face_with_area(const Side* sides, std::size_t n) const {
+    Index sheet = kNone;
+    for (std::size_t k = 0; k < n; ++k) {
+      if (faces[sides[k].f].ref[0] == kNoNormal) continue;
+      if (sheet != kNone) return kNone;
+      sheet = sides[k].f;
+    }
+    return sheet;
+  }
+
   // One side of a face seen from its lower endpoint v: the other endpoint w > v, the face, and which of the
   // face's edge slots it is.
   struct UpperSide {
@@ -568,6 +580,12 @@ struct Decimator {
           } else if (j - i == 2 && is_fold(sides[i].f, sides[i + 1].f)) {
             folds.emplace_back(id, sides[i].f);
             folds.emplace_back(id, sides[i + 1].f);
+          } else if (const Index sheet = only_face_with_area(sides.data() + i, j - i); sheet != kNone) {
+            // Faces of zero area along a border (collinear corners, as CAD exports leave) make it look
+            // interior, and it then had no planes to hold it: a flat grid with them along one side went to
+            // a single face at cost 0. It gets its one sheet's planes, as a fold does (and stays interior
+            // for parity, which is topology).
+            folds.emplace_back(id, sheet);
           }
           i = j;
         }

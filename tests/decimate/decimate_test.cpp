@@ -964,6 +964,33 @@ TEST(Decimate, TheLastFaceIsNeverRemoved) {
   expect_last_face(run(test::grid_square(4), point), DecimateStop::blocked, "would remove the last faces");
 }
 
+// Zero-area faces along a border (collinear corners on it, as CAD exports leave) made its edges look
+// interior, so it had no border planes: a flat grid with them on one side went to a single face at cost 0.
+TEST(Decimate, ZeroAreaFacesDoNotHideABorder) {
+  const int n = 20;
+  IndexedMesh mesh = test::grid_square(n);
+  // The bottom row's vertices, in order along y = 0 (grid_square numbers rows of n + 1 from y = 0).
+  for (int i = 0; i + 2 <= n; ++i) {
+    const auto v = static_cast<Index>(i);
+    ASSERT_EQ(mesh.positions[v].y(), 0.0f);
+    mesh.triangles.push_back({v, v + 1, v + 2});
+  }
+  DecimateOptions o;
+  o.max_error = 1e-6;
+  const DecimateResult r = run(mesh, o);
+  // The square's four corners stay, and the border stays on the square's outline.
+  std::set<std::array<float, 3>> corners;
+  for (const Vec3f& p : r.mesh.positions) {
+    const bool on_x = p.x() == 0 || p.x() == 1, on_y = p.y() == 0 || p.y() == 1;
+    if (on_x && on_y) corners.insert({p.x(), p.y(), p.z()});
+    EXPECT_TRUE(p.x() >= 0 && p.x() <= 1 && p.y() >= 0 && p.y() <= 1) << p.transpose();
+  }
+  EXPECT_EQ(corners.size(), 4u);
+  double area = 0;
+  for (const Triangle& t : r.mesh.triangles) area += 0.5 * face_normal(r.mesh, t).norm();
+  EXPECT_NEAR(area, 1.0, 1e-6);
+}
+
 // ------------------------------------------------------------------ carried quadrics
 
 TEST(Decimate, CarriedQuadricsEqualToFacePlanesChangeNothing) {
