@@ -30,8 +30,9 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
   CLI::Option* faces =
-      cmd->add_option("--faces", o.target_faces,
-                      "Stop at exactly N faces (N-1 where a closed manifold's parity forbids N)")
+      cmd->add_option(
+             "--faces", o.target_faces,
+             "Stop at exactly N faces (N-1 where every collapse left removes two, as on a closed manifold)")
           ->check(whole_number(1));
   cmd->add_option("--vertices", o.target_vertices, "Stop at exactly N vertices")->check(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Stop at round(R * input faces) faces, R in (0, 1]")

@@ -49,9 +49,10 @@ void add_simplify_command(CLI::App& app) {
   SimplifyOptions& o = flags->options;
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
-  CLI::Option* faces = cmd->add_option("--faces", o.target_faces,
-                                       "Exact face count (N-1 where a closed manifold's parity forbids N)")
-                           ->check(whole_number(1));
+  CLI::Option* faces =
+      cmd->add_option("--faces", o.target_faces,
+                      "Exact face count (N-1 where every collapse left removes two, as on a closed manifold)")
+          ->check(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
       ->check(fraction())
       ->excludes(faces);
