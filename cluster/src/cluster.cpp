@@ -124,6 +124,30 @@ double carried_border_scale(const FineCells& cells, const ClusterOptions& option
   return std::isfinite(scale) ? scale : 0.0;
 }
 
+// Leaves out the vertices whose `used` is 0, with their attributes and quadrics, keeping the others' order.
+void drop_unused_vertices(const std::vector<std::uint8_t>& used, QuadricMesh& out) {
+  IndexedMesh& mesh = out.mesh;
+  std::vector<Index> id(used.size(), 0);
+  Index kept = 0;
+  for (std::size_t v = 0; v < used.size(); ++v) {
+    if (!used[v]) continue;
+    id[v] = kept;
+    mesh.positions[kept] = mesh.positions[v];
+    if (!mesh.normals.empty()) mesh.normals[kept] = mesh.normals[v];
+    if (!mesh.colors.empty()) mesh.colors[kept] = mesh.colors[v];
+    if (!mesh.uvs.empty()) mesh.uvs[kept] = mesh.uvs[v];
+    if (!out.quadrics.empty()) out.quadrics[kept] = out.quadrics[v];
+    ++kept;
+  }
+  mesh.positions.resize(kept);
+  if (!mesh.normals.empty()) mesh.normals.resize(kept);
+  if (!mesh.colors.empty()) mesh.colors.resize(kept);
+  if (!mesh.uvs.empty()) mesh.uvs.resize(kept);
+  if (!out.quadrics.empty()) out.quadrics.resize(kept);
+  for (Triangle& t : mesh.triangles)
+    for (Index& v : t) v = id[v];
+}
+
 // Builds the output: one vertex per cluster, the clusters' triangles, and the surface quadrics.
 QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const ClusterOptions& options,
                      ClusterStats& stats) {
@@ -208,7 +232,15 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
   for (const Triangle& t : mesh.triangles)
     for (Index v : t) used[v] = 1;
   stats.isolated_vertices = static_cast<std::uint64_t>(std::count(used.begin(), used.end(), 0));
-  stats.output_vertices = clusters;
+  // A cluster whose every triangle collapsed (a grid cell at a corner of the surface, a part of the input
+  // smaller than a cell) is a vertex no face uses: a point that shows nothing, and that readers flag as
+  // unreferenced. It is left out, except where the octree's vertex target counts it (the octree joins such
+  // a cluster to a neighbour wherever a collapsed triangle links them, and keeps the rest as points so that
+  // --vertices N gives N), and where no face is left at all: the points are then all the output says of
+  // the input.
+  const bool keep_points = (options.octree && options.target_vertices > 0) || mesh.triangles.empty();
+  if (stats.isolated_vertices > 0 && !keep_points) drop_unused_vertices(used, out);
+  stats.output_vertices = mesh.positions.size();
   stats.output_faces = mesh.triangles.size();
   return out;
 }

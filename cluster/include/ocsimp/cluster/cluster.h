@@ -129,12 +129,14 @@ struct ClusterStats {
   // span the bounding box; far less when vertices no face uses stretch it (the box is the vertex array's).
   std::uint32_t spanned_cells = 0;
   double fine_cell_size = 0;
-  std::uint64_t output_vertices = 0;  // = clusters
+  std::uint64_t output_vertices = 0;  // written: the clusters, less the isolated ones left out
   std::uint64_t output_faces = 0;
   // On the grid the pass accumulated on (the output's, for a plain uniform grid):
   std::uint64_t collapsed_triangles = 0;  // input triangles with two corners in one cell
   std::uint64_t duplicate_triangles = 0;  // input triangles whose three cells an earlier one had
-  std::uint64_t isolated_vertices = 0;    // output vertices no output face uses (every triangle collapsed)
+  // Clusters no output face uses (every triangle collapsed): left out of the output, except as the octree's
+  // vertex target counts them or where no face is left at all.
+  std::uint64_t isolated_vertices = 0;
   // Uniform grid: the output cells' edge length and how many of them span the longest axis (rounded up:
   // with `target_faces` the resolution need not be whole).
   std::uint32_t output_grid = 0;
