@@ -11,6 +11,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -59,7 +60,9 @@ bool looks_ascii(ByteReader& reader) {
 
 class BinaryStlParser {
  public:
-  explicit BinaryStlParser(const std::string& path) : reader_(path) {
+  // `warn`: told when the count in the header is below what the file holds (see below); may be empty.
+  BinaryStlParser(const std::string& path, const std::function<void(const std::string&)>& warn)
+      : reader_(path) {
     if (reader_.file_size() < kHeaderBytes + 4)
       throw Error(
           path, FilePosition::byte(reader_.file_size()),
@@ -74,6 +77,23 @@ class BinaryStlParser {
                   "binary STL header claims " + std::to_string(count) + " triangles (" +
                       std::to_string(needed) + " bytes) but the file has " +
                       std::to_string(reader_.file_size()) + " bytes");
+    if (needed < reader_.file_size()) {
+      // Writers that stream their triangles sometimes leave the count at 0, or at a first batch's: when
+      // whole triangles follow, they are read, and the run says so (an STL whose header said 0 read as
+      // empty, without a word). Other trailing bytes (padding) are left alone, as before, and named.
+      const std::uint64_t extra = reader_.file_size() - needed;
+      const std::uint64_t held = (reader_.file_size() - kHeaderBytes - 4) / kTriangleBytes;
+      if (extra % kTriangleBytes == 0 && held <= std::numeric_limits<std::uint32_t>::max()) {
+        if (warn)
+          warn("the binary STL header claims " + std::to_string(count) + " triangles, but the file holds " +
+               std::to_string(held) + "; all " + std::to_string(held) + " are read");
+        count = static_cast<std::uint32_t>(held);
+      } else if (warn) {
+        warn("the " + std::to_string(extra) + " bytes after the " + std::to_string(count) +
+             " triangles the binary STL header claims (byte " + std::to_string(needed) +
+             " on) are not whole triangles, and are ignored");
+      }
+    }
     remaining_ = count;
     total_ = count;
   }
@@ -233,12 +253,12 @@ class AsciiStlParser {
 // One of the two parsers, chosen by looking at the file.
 class StlParser {
  public:
-  explicit StlParser(const std::string& path) {
+  StlParser(const std::string& path, const std::function<void(const std::string&)>& warn) {
     ByteReader probe(path, 1 << 12);
     if (looks_ascii(probe)) {
       ascii_.emplace(path);
     } else {
-      binary_.emplace(path);
+      binary_.emplace(path, warn);
     }
   }
   bool read(std::vector<Corners>& out, std::size_t max) {
@@ -255,7 +275,7 @@ class StlParser {
 class StlStream final : public TriangleStream {
  public:
   StlStream(const std::string& path, const ReadOptions& options)
-      : parser_(path),
+      : parser_(path, options.warn),
         capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
         progress_(options.progress) {}
 
@@ -274,7 +294,7 @@ class StlStream final : public TriangleStream {
 
   Box3 bounds() override {
     if (!bounds_) {
-      StlParser scan(path());
+      StlParser scan(path(), {});  // the stream's own parser has warned
       std::vector<Corners> corners;
       Box3 box;
       while (scan.read(corners, 1 << 16)) {

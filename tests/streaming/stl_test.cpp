@@ -121,6 +121,36 @@ TEST(Stl, BinaryIgnoresBytesAfterTheLastTriangle) {
   EXPECT_EQ(read_mesh(dir / "c.stl").face_count(), 12u);
 }
 
+// Streaming writers may leave the header's count at 0 (or a first batch's): the whole triangles that follow
+// are read, with a warning, where they were dropped without one. Bytes that are not whole triangles are
+// still ignored, and named.
+TEST(Stl, BinaryReadsWholeTrianglesPastTheHeadersCount) {
+  TempDir dir;
+  const IndexedMesh mesh = test::cube(1);
+  write_mesh(dir / "c.stl", mesh);
+  const std::string bytes = test::read_file_bytes(dir / "c.stl");
+  std::vector<std::string> warnings;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { warnings.push_back(message); };
+  for (std::uint32_t claimed : {0u, 5u}) {
+    std::string edited = bytes;
+    std::memcpy(edited.data() + 80, &claimed, 4);
+    test::write_file_bytes(dir / "c.stl", edited);
+    warnings.clear();
+    const IndexedMesh back = read_mesh(dir / "c.stl", options);
+    EXPECT_EQ(back.face_count(), 12u) << claimed;
+    expect_same_soup(mesh, back);
+    ASSERT_EQ(warnings.size(), 1u) << claimed;
+    EXPECT_EQ(warnings[0], "the binary STL header claims " + std::to_string(claimed) +
+                               " triangles, but the file holds 12; all 12 are read");
+  }
+  test::write_file_bytes(dir / "c.stl", bytes + std::string(17, '\0'));
+  warnings.clear();
+  EXPECT_EQ(read_mesh(dir / "c.stl", options).face_count(), 12u);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("the 17 bytes after the 12 triangles"), std::string::npos) << warnings[0];
+}
+
 TEST(Stl, AsciiToleratesCaseBlanksLineEndingsAndSeveralSolids) {
   TempDir dir;
   const std::string text =
