@@ -334,6 +334,26 @@ TEST(Cli, FailedConvertLeavesNothingBehind) {
   EXPECT_FALSE(std::filesystem::exists(dir / "out.xyz"));
 }
 
+// On a terminal, an error that stops a read ends the progress bar's line first: convert kept its bar alive
+// past the command, and the error ran on after "0s left".
+TEST(Cli, AnErrorOnATerminalStartsItsOwnLine) {
+  if (std::system("command -v script >/dev/null 2>&1") != 0) GTEST_SKIP() << "no script(1) for a terminal";
+  test::TempDir dir;
+  const std::string whole = dir / "whole.ply", cut = dir / "cut.ply", log = dir / "terminal.txt";
+  ASSERT_EQ(run("gen -q -o " + whole + " --triangles 20000", dir).exit_code, 0);
+  const std::string bytes = file_bytes(whole);
+  std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() * 3 / 5);
+  for (const std::string& args : {"convert " + cut + " " + (dir / "o.ply"), "info " + cut}) {
+    std::string script = "script -qec '";
+    script.append(kOcsimp).append(" ").append(args).append("' /dev/null > ").append(log).append(" 2>&1");
+    EXPECT_NE(std::system(script.c_str()), 0) << args;
+    const std::string text = file_bytes(log);
+    const std::size_t at = text.find("ocsimp: " + cut);
+    ASSERT_NE(at, std::string::npos) << text;
+    EXPECT_TRUE(at == 0 || text[at - 1] == '\n') << args << ": " << text;
+  }
+}
+
 TEST(Cli, AnUnwritableDestinationFailsBeforeAnyOutput) {
   // A report in a missing folder, or a destination that is a folder, used to fail only at the end, after the
   // mesh had been written: the run failed and left its output.

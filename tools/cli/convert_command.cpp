@@ -33,8 +33,11 @@ void add_convert_command(CLI::App& app) {
     read.progress = console.progress;
     read.warn = console.warn;
     read.faces_required = false;  // a mesh without faces converts too, with write_result's warning
-    flags->write.progress = read.progress;
-    write_result(flags->output, read_mesh(flags->input, read), flags->write);
+    // A copy: stored in the flags, which outlive the command, the bar's last owner kept its line open
+    // until after main printed an error, which then ran on after the bar.
+    WriteOptions write = flags->write;
+    write.progress = read.progress;
+    write_result(flags->output, read_mesh(flags->input, read), write);
   });
 }
 

@@ -48,15 +48,16 @@ void add_gen_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
-    flags->options.progress = make_progress(flags->quiet);
+    GenerateOptions options = flags->options;  // a copy, as in convert: the bar ends with the command
+    options.progress = make_progress(flags->quiet);
     GeneratedCounts counts;
     if (check_mesh_destination(flags->output) == FileFormat::ply) {
-      counts = generate_scan_ply(flags->output, flags->options);
+      counts = generate_scan_ply(flags->output, options);
     } else {
-      const IndexedMesh mesh = generate_scan_mesh(flags->options);
+      const IndexedMesh mesh = generate_scan_mesh(options);
       counts = {0, mesh.vertex_count(), mesh.face_count()};
       WriteOptions write;
-      write.ascii = flags->options.ascii;
+      write.ascii = options.ascii;
       write_result(flags->output, mesh, write);
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
