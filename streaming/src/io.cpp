@@ -81,15 +81,19 @@ FileFormat detect_format(const std::string& path) {
   const std::size_t n = reader.fill(512);
   const std::string_view head(reader.data(), n);
   if (n == 0) throw Error(path, FilePosition::byte(0), "empty file");
-  if (starts_with(head, "ply\n") || starts_with(head, "ply\r\n")) return FileFormat::ply;
-  if (starts_with(head, "DRACO")) return FileFormat::drc;
   // Binary STL: an 80-byte header, a triangle count, then exactly 50 bytes a triangle. Checked before the
-  // text forms because binary headers often begin with "solid" too.
+  // text forms because binary headers often begin with "solid" too, and, for a .stl, before the magic
+  // words: the header is free text, and one that began "DRACO" or "ply" (an exporter's name) was refused.
+  bool binary_stl = false;
   if (reader.file_size() >= 84 && n >= 84) {
     std::uint32_t count;
     std::memcpy(&count, reader.data() + 80, 4);
-    if (84 + 50 * static_cast<std::uint64_t>(count) == reader.file_size()) return FileFormat::stl;
+    binary_stl = 84 + 50 * static_cast<std::uint64_t>(count) == reader.file_size();
   }
+  if (binary_stl && format_of_extension(path) == FileFormat::stl) return FileFormat::stl;
+  if (starts_with(head, "ply\n") || starts_with(head, "ply\r\n")) return FileFormat::ply;
+  if (starts_with(head, "DRACO")) return FileFormat::drc;
+  if (binary_stl) return FileFormat::stl;
   // Text formats are recognized by content whatever the extension says; only bytes that are neither (a
   // damaged binary file) fall back on the extension.
   bool text = true;

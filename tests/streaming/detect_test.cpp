@@ -70,6 +70,21 @@ TEST(Detect, BinaryStlWhoseHeaderSaysSolid) {
   EXPECT_EQ(read_mesh(dir / "c.dat").face_count(), test::cube(2).face_count());
 }
 
+// A binary STL's header is free text: one that began with another format's magic word was refused. Its
+// exact size decides for a .stl; other names still go by the magic word.
+TEST(Detect, BinaryStlWhoseHeaderStartsWithAnotherFormatsMagic) {
+  TempDir dir;
+  write_mesh(dir / "c.stl", test::cube(2));
+  const std::string bytes = test::read_file_bytes(dir / "c.stl");
+  for (const std::string& magic : {std::string("DRACO exporter"), std::string("ply\nexporter")}) {
+    std::string edited = bytes;
+    edited.replace(0, magic.size(), magic);
+    EXPECT_EQ(detect_bytes(dir, "c.stl", edited), FileFormat::stl) << magic;
+    EXPECT_EQ(read_mesh(dir / "c.stl").face_count(), test::cube(2).face_count()) << magic;
+    EXPECT_NE(detect_bytes(dir, "c.dat", edited), FileFormat::stl) << magic;
+  }
+}
+
 TEST(Detect, DracoByMagic) {
   TempDir dir;
   WriteOptions options;
