@@ -53,7 +53,10 @@ class HeaderParser {
       fail("the lines end in a carriage return alone (classic Mac OS); PLY needs LF or CR LF line endings");
     }
     std::string_view line = next_line();
-    if (line != "ply") fail("not a PLY file: the first line must be 'ply'");
+    // Trailing blanks are forgiven here as on every other header line.
+    const std::size_t end = line.find_last_not_of(" \t");
+    if (line.substr(0, end == std::string_view::npos ? 0 : end + 1) != "ply")
+      fail("not a PLY file: the first line must be 'ply'");
     bool have_format = false;
     // Names seen, for the duplicate checks: a header of 300,000 elements took a minute when each new name
     // was compared with every earlier one.

@@ -640,6 +640,9 @@ TEST(PlyTypes, AsciiToleratesBlankLinesAndExtraSpacesAndNoFinalNewline) {
       "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
       "\n  0 0 0  \n1\t0 +0\n\n1 1 0\n0 1 0\n3 0 1 2\n  3 0 2 3");
   EXPECT_EQ(read_mesh(dir / "loose.ply").triangles, kSquareTriangles);
+  // Trailing blanks on the first line too, as on every other header line (it was refused as not a PLY).
+  write_bytes(dir / "blank.ply", "ply \t" + read_bytes(dir / "loose.ply").substr(3));
+  EXPECT_EQ(read_mesh(dir / "blank.ply").triangles, kSquareTriangles);
 }
 
 // ---- Layouts
