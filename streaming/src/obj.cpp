@@ -9,7 +9,9 @@
 // Passes 2 and 3 start at the first face statement, since everything before it was loaded already.
 // Negative indices count back from the records read so far at that line, as the format specifies.
 // Accepted and ignored: comments (whole lines, or from a '#' after a statement), o g s usemtl mtllib l p vp
-// and any unknown statement. A '\' at the end of a line continues the statement on the next one.
+// and any unknown statement, unless the file has no vertex at all: text that only starts like an OBJ (a
+// README's '#' heading) is refused at its first line that is no OBJ statement. A '\' at the end of a line
+// continues the statement on the next one.
 #include <algorithm>
 #include <charconv>
 #include <cstring>
@@ -135,6 +137,23 @@ class ObjStream final : public TriangleStream {
   }
 
  private:
+  // Whether the statement's keyword is one the OBJ format defines (free-form geometry, grouping, display and
+  // rendering attributes), all ignored here but v, vt, vn and f.
+  static bool known_statement(std::string_view line) {
+    const char* end = line.data() + line.size();
+    const char* p = skip_blanks(line.data(), end);
+    const std::string_view keyword(p, static_cast<std::size_t>(token_end(p, end) - p));
+    if (keyword.starts_with('#')) return true;  // a comment
+    for (std::string_view k :
+         {"o",      "g",      "s",          "mg",        "usemtl", "mtllib", "l",        "p",        "vp",
+          "cstype", "deg",    "bmat",       "step",      "curv",   "curv2",  "surf",     "parm",     "trim",
+          "hole",   "scrv",   "sp",         "end",       "con",    "bevel",  "c_interp", "d_interp", "lod",
+          "usemap", "maplib", "shadow_obj", "trace_obj", "ctech",  "stech",  "call",     "csh"}) {
+      if (keyword == k) return true;
+    }
+    return false;
+  }
+
   [[noreturn]] void fail(const std::string& reason) const {
     throw Error(reader_.path(), FilePosition::line(statement_line_), reason);
   }
@@ -206,10 +225,20 @@ class ObjStream final : public TriangleStream {
           if (!faces_have_slashes_ && std::memchr(rest, '/', static_cast<std::size_t>(end - rest)))
             faces_have_slashes_ = true;
           break;
+        case Keyword::other:
+          if (first_unknown_line_ == 0 && !known_statement(line)) {
+            first_unknown_line_ = statement_line_;
+            first_unknown_ = quote_token(skip_blanks(line.data(), end), end);
+          }
+          break;
         default:
           break;
       }
       report_progress();
+    }
+    if (seen_.v == 0 && first_unknown_line_ > 0) {
+      statement_line_ = first_unknown_line_;
+      fail(first_unknown_ + " is no OBJ statement, and the file has no vertex: not an OBJ file");
     }
     if (face_statements_ == 0) first_face_ = {reader_.file_size(), lines_.line_number() + 1, seen_};
     needs_attribute_pass_ = faces_have_slashes_ && (!uv_records_.empty() || !normal_records_.empty());
@@ -465,6 +494,8 @@ class ObjStream final : public TriangleStream {
   RecordCounts total_;
   RecordCounts seen_;  // records passed so far in the current pass, for relative indices
   std::uint64_t face_statements_ = 0;
+  std::uint64_t first_unknown_line_ = 0;  // of the first statement the format does not define (0: none)
+  std::string first_unknown_;             // its keyword, quoted
   bool faces_have_slashes_ = false;
   bool needs_attribute_pass_ = false;
 

@@ -399,6 +399,8 @@ const std::vector<test::MalformedCase> kMalformed = {
     {"texcoord_out_of_range.obj", FilePosition::Kind::line, 5, "texture coordinate index 2 out of range"},
     {"normal_index_zero.obj", FilePosition::Kind::line, 5, "normal index 0"},
     {"continued_error.obj", FilePosition::Kind::line, 4, "vertex index 9 out of range"},
+    {"text_not_obj.obj", FilePosition::Kind::line, 3,
+     "'These' is no OBJ statement, and the file has no vertex"},
 };
 
 class ObjMalformed : public ::testing::TestWithParam<test::MalformedCase> {};
