@@ -927,13 +927,19 @@ bool killed_mid_run(const std::vector<std::string>& args, const std::string& tmp
   return WIFSIGNALED(status) && WTERMSIG(status) == signal;
 }
 
-// killed_mid_run with ever shorter delays until the signal lands while the command still runs (how long it
-// runs depends on the machine and its load); outputs of runs that finished first are removed in between.
+// killed_mid_run at half of what a whole run takes here, then at ever shorter delays until the signal lands
+// while the command still runs; outputs of runs that finished first are removed in between. Fixed delays
+// (400 ms first) could land after the output's rename, in the last moments of a run that then took about
+// 400 ms, and the output rightly existed.
 bool killed_while_running(const std::vector<std::string>& args, const std::string& tmpdir, int signal,
                           const std::vector<std::string>& outputs) {
-  for (int delay : {400, 200, 100, 50, 20}) {
+  const auto start = std::chrono::steady_clock::now();
+  if (killed_mid_run(args, tmpdir, 0, std::chrono::milliseconds(0))) return false;  // signal 0: a whole run
+  const auto whole =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start);
+  for (auto delay = whole / 2; delay.count() > 0; delay /= 2) {
     for (const std::string& output : outputs) std::filesystem::remove(output);
-    if (killed_mid_run(args, tmpdir, signal, std::chrono::milliseconds(delay))) return true;
+    if (killed_mid_run(args, tmpdir, signal, delay)) return true;
   }
   return false;
 }
