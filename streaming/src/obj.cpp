@@ -361,14 +361,16 @@ class ObjStream final : public TriangleStream {
     if (p - digits > 12) value = std::uint64_t(1) << 40;  // past any count; the digits above may have wrapped
     if (value == 0)
       fail(std::string(what) + " index 0 in " + quote_token(corner, end) + " (OBJ counts from 1)");
+    // Errors quote the index as written: the value is clamped past 12 digits.
+    const std::string_view written(digits, static_cast<std::size_t>(p - digits));
     if (negative) {
       if (value > seen)
-        fail("relative " + std::string(what) + " index -" + std::to_string(value) +
+        fail("relative " + std::string(what) + " index -" + std::string(written) +
              " reaches before the first " + what + " (" + std::to_string(seen) + " so far)");
       return static_cast<Index>(seen - value);
     }
     if (value > total)
-      fail(std::string(what) + " index " + std::to_string(value) + " out of range (the file has " +
+      fail(std::string(what) + " index " + std::string(written) + " out of range (the file has " +
            std::to_string(total) + ")");
     return static_cast<Index>(value - 1);
   }

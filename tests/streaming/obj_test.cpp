@@ -381,7 +381,7 @@ TEST(ObjShared, OtherModels) {
 const std::vector<test::MalformedCase> kMalformed = {
     {"zero_index.obj", FilePosition::Kind::line, 5, "vertex index 0"},
     {"index_out_of_range.obj", FilePosition::Kind::line, 4, "vertex index 7 out of range (the file has 3)"},
-    {"huge_index.obj", FilePosition::Kind::line, 4, "out of range"},
+    {"huge_index.obj", FilePosition::Kind::line, 4, "vertex index 99999999999999999999999 out of range"},
     {"relative_before_first.obj", FilePosition::Kind::line, 4, "reaches before the first vertex"},
     {"face_two_corners.obj", FilePosition::Kind::line, 5, "at least 3 corners (found 2)"},
     {"face_no_corners.obj", FilePosition::Kind::line, 4, "at least 3 corners (found 0)"},
