@@ -260,6 +260,26 @@ TEST(Cli, AResultWithoutFacesIsWrittenWithAWarning) {
   EXPECT_GT(read_mesh(result).face_count(), 0u);
 }
 
+// Draco's encoder drops faces with a repeated corner without a word: convert says how many.
+TEST(Cli, ConvertToDracoSaysWhichFacesItLosesAndOthersLoseNone) {
+  test::TempDir dir;
+  IndexedMesh mesh = test::grid_square(2);
+  mesh.triangles.push_back({0, 0, 1});
+  mesh.triangles.push_back({4, 5, 5});
+  const std::string in = dir / "in.ply";
+  write_mesh(in, mesh);
+  const CommandResult drc = run("convert -q " + in + " " + (dir / "out.drc"), dir);
+  EXPECT_EQ(drc.exit_code, 0) << drc.err;
+  EXPECT_EQ(lines(drc.err), 1u) << drc.err;
+  EXPECT_NE(drc.err.find("out.drc: 2 faces with a repeated corner are left out"), std::string::npos)
+      << drc.err;
+  EXPECT_EQ(read_mesh(dir / "out.drc").face_count(), 8u);
+  const CommandResult ply = run("convert -q " + in + " " + (dir / "out.ply"), dir);
+  EXPECT_EQ(ply.exit_code, 0) << ply.err;
+  EXPECT_TRUE(ply.err.empty()) << ply.err;
+  EXPECT_EQ(read_mesh(dir / "out.ply").face_count(), 10u);
+}
+
 // An input without faces is refused as every other command refuses it, not written empty under a warning
 // that "every triangle collapsed".
 TEST(Cli, ClusterRefusesAnInputWithoutFaces) {

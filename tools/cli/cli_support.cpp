@@ -218,6 +218,17 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
                  "ocsimp: warning: %s has no faces (%zu vertices): only info and convert read such a file\n",
                  path.c_str(), mesh.positions.size());
   }
+  if (format == FileFormat::drc) {
+    // Draco's encoder leaves them out, without a word of its own.
+    const auto repeated = std::count_if(mesh.triangles.begin(), mesh.triangles.end(), [](const Triangle& t) {
+      return t[0] == t[1] || t[1] == t[2] || t[2] == t[0];
+    });
+    if (repeated > 0) {
+      std::fprintf(stderr,
+                   "ocsimp: warning: %s: %td faces with a repeated corner are left out (Draco drops them)\n",
+                   path.c_str(), repeated);
+    }
+  }
 }
 
 void check_destination(const std::string& path) {
