@@ -34,8 +34,9 @@ void add_cluster_command(CLI::App& app) {
   auto* cell = cmd->add_option("--cell-size", flags->options.cell_size, "Uniform grid: edge length of a cell")
                    ->check(positive_number());
   auto* faces = cmd->add_option("--faces", flags->faces,
-                                "Face budget: the largest face count not above it (octree: by merging; "
-                                "uniform grid: by choosing the resolution)")
+                                "Face budget, never exceeded. Octree: the largest face count not above it, "
+                                "by merging; uniform grid: the resolution a search finds closest below it (a "
+                                "grid's face count does not grow strictly with its resolution)")
                     ->check(whole_number(1, std::uint64_t{1} << 40));
   auto* octree =
       cmd->add_flag("--octree", flags->options.octree, "Adaptive octree: needs --vertices or --faces");
