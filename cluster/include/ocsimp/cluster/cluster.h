@@ -73,8 +73,9 @@ struct ClusterOptions {
   // finest grid the input allows has fewer occupied cells; ClusterStats::target_met then says so). Parts of
   // the input smaller than a cluster end as vertices of no face; they count too.
   std::uint64_t target_vertices = 0;
-  // Octree: the largest face count not above this that merging reaches. Uniform grid: the resolution whose
-  // face count is the largest not above this, among the re-clusterings of the fine grid's cells.
+  // Never exceeded. Octree: the largest face count not above this that merging reaches. Uniform grid: the
+  // re-clustering of the fine grid's cells whose face count a search over resolutions finds closest below
+  // this (the count does not grow strictly with the resolution, so a finer one may still give fewer).
   std::uint64_t target_faces = 0;
   // Target-driven modes accumulate on a fine power-of-two grid of about this many occupied cells per
   // targeted output vertex (a face target counts as target_faces / 2 vertices), then merge.
