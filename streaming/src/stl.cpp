@@ -35,27 +35,49 @@ constexpr std::uint64_t kProgressStep = 8u << 20;
 
 using Corners = std::array<Vec3f, 3>;
 
+// Whether `head` begins with "solid", in any case, after a UTF-8 byte order mark and blanks.
+bool begins_with_solid(std::string_view head) {
+  const std::size_t bom = head.starts_with("\xEF\xBB\xBF") ? 3 : 0;
+  const std::size_t first = head.find_first_not_of(" \t\r\n", bom);
+  if (first == std::string_view::npos || head.size() < first + 5) return false;
+  for (std::size_t i = 0; i < 5; ++i) {
+    if ((head[first + i] | 0x20) != "solid"[i]) return false;
+  }
+  return true;
+}
+
+// The first byte of `head` that is no text (a control character other than a blank), or npos.
+std::size_t first_non_text(std::string_view head) {
+  for (std::size_t i = 0; i < head.size(); ++i) {
+    const auto u = static_cast<unsigned char>(head[i]);
+    if (u < 0x20 && u != '\n' && u != '\r' && u != '\t' && u != '\v' && u != '\f') return i;
+  }
+  return std::string_view::npos;
+}
+
 // Binary unless the file starts with "solid" followed by text only: binary headers often say "solid" too, but
 // their count and float bytes give them away within the first few hundred bytes.
 bool looks_ascii(ByteReader& reader) {
   const std::size_t n = reader.fill(512);
-  std::string_view head(reader.data(), n);
-  const std::size_t bom = head.starts_with("\xEF\xBB\xBF") ? 3 : 0;  // UTF-8 byte order mark
-  const std::size_t first = head.find_first_not_of(" \t\r\n", bom);
-  if (first == std::string_view::npos || head.size() < first + 5) return false;
-  for (std::size_t i = 0; i < 5; ++i) {
-    if ((head[first + i] | 0x20) != "solid"[i]) return false;  // any case
-  }
+  const std::string_view head(reader.data(), n);
+  if (!begins_with_solid(head)) return false;
   if (n >= kHeaderBytes + 4 && reader.file_size() >= kHeaderBytes + 4) {
     std::uint32_t count;
     std::memcpy(&count, reader.data() + kHeaderBytes, 4);
     if (kHeaderBytes + 4 + kTriangleBytes * std::uint64_t(count) == reader.file_size()) return false;
   }
-  for (char c : head) {
-    const auto u = static_cast<unsigned char>(c);
-    if (u < 0x20 && c != '\n' && c != '\r' && c != '\t' && c != '\v' && c != '\f') return false;
-  }
-  return true;
+  return first_non_text(head) == std::string_view::npos;
+}
+
+// For a file taken as binary whose count then fails: when it begins with "solid", which byte was not text
+// (an ASCII STL with a NUL in its name read as a bad binary count, which pointed the wrong way).
+std::string ascii_lookalike(ByteReader& reader) {
+  const std::size_t n = reader.fill(512);
+  const std::string_view head(reader.data(), n);
+  const std::size_t at = begins_with_solid(head) ? first_non_text(head) : std::string_view::npos;
+  return at == std::string_view::npos
+             ? ""
+             : "; it begins like an ASCII STL, but byte " + std::to_string(at) + " is not text";
 }
 
 class BinaryStlParser {
@@ -70,13 +92,13 @@ class BinaryStlParser {
     reader_.fill(kHeaderBytes + 4);
     std::uint32_t count;
     std::memcpy(&count, reader_.data() + kHeaderBytes, 4);
-    reader_.consume(kHeaderBytes + 4);
     const std::uint64_t needed = kHeaderBytes + 4 + kTriangleBytes * std::uint64_t(count);
     if (needed > reader_.file_size())
       throw Error(path, FilePosition::byte(kHeaderBytes),
                   "binary STL header claims " + std::to_string(count) + " triangles (" +
                       std::to_string(needed) + " bytes) but the file has " +
-                      std::to_string(reader_.file_size()) + " bytes");
+                      std::to_string(reader_.file_size()) + " bytes" + ascii_lookalike(reader_));
+    reader_.consume(kHeaderBytes + 4);
     if (needed < reader_.file_size()) {
       // Writers that stream their triangles sometimes leave the count at 0, or at a first batch's: when
       // whole triangles follow, they are read, and the run says so (an STL whose header said 0 read as

@@ -265,6 +265,8 @@ const std::vector<test::MalformedCase> kMalformed = {
     {"ascii_inf_vertex.stl", FilePosition::Kind::line, 5, "NaN or infinite"},
     {"ascii_extra_token.stl", FilePosition::Kind::line, 4, "unexpected '4'"},
     {"ascii_missing_endfacet.stl", FilePosition::Kind::line, 8, "expected 'endfacet'"},
+    {"ascii_nul_in_name.stl", FilePosition::Kind::byte, 80,
+     "begins like an ASCII STL, but byte 7 is not text"},
 };
 
 class StlMalformed : public ::testing::TestWithParam<test::MalformedCase> {};
