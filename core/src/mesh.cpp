@@ -76,7 +76,7 @@ MeshTopology analyze_topology(const IndexedMesh& mesh) {
   DisjointSets sets(n);
   for (Index f = 0; f < mesh.triangles.size(); ++f) {
     const Triangle& t = mesh.triangles[f];
-    if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) {
+    if (has_repeated_corner(t)) {
       ++topo.degenerate_faces;
       continue;
     }
@@ -102,7 +102,7 @@ MeshTopology analyze_topology(const IndexedMesh& mesh) {
   // edges, form one fan. Count face-groups per vertex with a union-find over (vertex, face) incidences.
   std::vector<std::size_t> first_incidence(n + 1, 0);
   for (const Triangle& t : mesh.triangles) {
-    if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) continue;
+    if (has_repeated_corner(t)) continue;
     for (Index v : t) ++first_incidence[v + 1];
   }
   std::partial_sum(first_incidence.begin(), first_incidence.end(), first_incidence.begin());
@@ -111,7 +111,7 @@ MeshTopology analyze_topology(const IndexedMesh& mesh) {
     std::vector<std::size_t> cursor(first_incidence.begin(), first_incidence.end() - 1);
     for (Index f = 0; f < mesh.triangles.size(); ++f) {
       const Triangle& t = mesh.triangles[f];
-      if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) continue;
+      if (has_repeated_corner(t)) continue;
       for (Index v : t) incident_faces[cursor[v]++] = f;
     }
   }

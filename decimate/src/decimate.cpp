@@ -383,7 +383,7 @@ struct Decimator {
     if (opt.weld) weld(in);
     std::size_t kept = 0;
     for (const Triangle& t : m.triangles) {
-      if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) continue;
+      if (has_repeated_corner(t)) continue;
       m.triangles[kept++] = t;
     }
     stats.dropped_degenerate_faces = m.triangles.size() - kept;

@@ -220,9 +220,7 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
   }
   if (format == FileFormat::drc) {
     // Draco's encoder leaves them out, without a word of its own.
-    const auto repeated = std::count_if(mesh.triangles.begin(), mesh.triangles.end(), [](const Triangle& t) {
-      return t[0] == t[1] || t[1] == t[2] || t[2] == t[0];
-    });
+    const auto repeated = std::count_if(mesh.triangles.begin(), mesh.triangles.end(), has_repeated_corner);
     if (repeated > 0) {
       std::fprintf(stderr,
                    "ocsimp: warning: %s: %td faces with a repeated corner are left out (Draco drops them)\n",

@@ -16,6 +16,11 @@ using Vec3d = Eigen::Vector3d;
 // Vertex indices are 32-bit: a billion-triangle scan has about half a billion vertices.
 using Index = std::uint32_t;
 using Triangle = std::array<Index, 3>;
+
+// A face that names one vertex twice: no area, no edges of its own (readers keep it; stages drop it).
+inline bool has_repeated_corner(const Triangle& t) {
+  return t[0] == t[1] || t[1] == t[2] || t[2] == t[0];
+}
 // RGBA, 8 bits a channel: what PLY, Draco and most scanners store.
 using Color = std::array<std::uint8_t, 4>;
 
