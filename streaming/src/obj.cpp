@@ -226,7 +226,9 @@ class ObjStream final : public TriangleStream {
             faces_have_slashes_ = true;
           break;
         case Keyword::other:
-          if (first_unknown_line_ == 0 && !known_statement(line)) {
+          // Only before the first vertex, where the error can still apply: files of many g / usemtl lines
+          // pay nothing after it.
+          if (seen_.v == 0 && first_unknown_line_ == 0 && !known_statement(line)) {
             first_unknown_line_ = statement_line_;
             first_unknown_ = quote_token(skip_blanks(line.data(), end), end);
           }
