@@ -105,11 +105,15 @@ class BinaryStlParser {
       // empty, without a word). Other trailing bytes (padding) are left alone, as before, and named.
       const std::uint64_t extra = reader_.file_size() - needed;
       const std::uint64_t held = (reader_.file_size() - kHeaderBytes - 4) / kTriangleBytes;
-      if (extra % kTriangleBytes == 0 && held <= std::numeric_limits<std::uint32_t>::max()) {
+      if (extra % kTriangleBytes == 0) {
+        // The count is 32 bits: past 2^32 - 1 triangles (214 GB) the rest stays unread, as the format allows.
+        const auto read = static_cast<std::uint32_t>(
+            std::min<std::uint64_t>(held, std::numeric_limits<std::uint32_t>::max()));
         if (warn)
           warn("the binary STL header claims " + std::to_string(count) + " triangles, but the file holds " +
-               std::to_string(held) + "; all " + std::to_string(held) + " are read");
-        count = static_cast<std::uint32_t>(held);
+               std::to_string(held) + "; " + (read == held ? "all " : "the first ") + std::to_string(read) +
+               " are read");
+        count = read;
       } else if (warn) {
         warn("the " + std::to_string(extra) + " bytes after the " + std::to_string(count) +
              " triangles the binary STL header claims (byte " + std::to_string(needed) +
