@@ -160,6 +160,29 @@ TEST(Cli, GenIsDeterministicAndInfoCountsIt) {
   EXPECT_EQ(j["components"].get<long>(), 1);
 }
 
+// File names are bytes. One that is not UTF-8 made every JSON output fail after the work was done (exit 1,
+// and a decimated mesh written without its report).
+TEST(Cli, JsonOutputsNameAFileWhoseNameIsNotUtf8) {
+  test::TempDir dir;
+  const std::string mesh = dir / "x\xff\x01.ply", out = dir / "y.ply", report = dir / "r.json";
+  write_mesh(mesh, test::grid_square(8));
+
+  const CommandResult info = run("info --json " + mesh, dir);
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json j = nlohmann::json::parse(info.out);
+  EXPECT_EQ(j["faces"].get<long>(), 128);
+
+  const CommandResult decimate =
+      run("decimate -q " + mesh + " -o " + out + " --faces 20 --report " + report, dir);
+  ASSERT_EQ(decimate.exit_code, 0) << decimate.err;
+  const nlohmann::json r = nlohmann::json::parse(file_bytes(report));
+  EXPECT_EQ(r["output"]["faces"].get<long>(), 20) << r.dump();
+  EXPECT_NE(r.dump().find("x\xef\xbf\xbd\\u0001.ply"), std::string::npos) << r.dump();
+
+  const CommandResult compare = run("compare -q --json --samples 1000 " + mesh + " " + out, dir);
+  ASSERT_EQ(compare.exit_code, 0) << compare.err;
+  EXPECT_GE(nlohmann::json::parse(compare.out)["hausdorff"].get<double>(), 0.0);
+}
 // A scan in georeferenced double coordinates (gen --offset, as UTM metres) simplifies as well as the same
 // scan at zero by every command, and comes out in double coordinates: float positions at y = 4.2e6 are 0.5
 // apart, half the scan's size, so reading it into floats as it stands made a 27 % Hausdorff distance of a

@@ -277,9 +277,13 @@ void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_p
                   " this process can have" + (instead.empty() ? "" : "; " + instead));
 }
 
+std::string json_text(const nlohmann::json& value) {
+  return value.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 void write_json_report(const std::string& path, const nlohmann::json& report) {
   AtomicFile file(path);
-  file.write(report.dump(2));
+  file.write(json_text(report));
   file.write("\n");
   file.commit();
 }

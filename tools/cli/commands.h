@@ -86,7 +86,11 @@ void check_report_destination(const std::string& report, const std::vector<std::
 void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_per_face,
                            const std::string& holding, const std::string& instead);
 
-// Writes `report` as pretty JSON to `path`, atomically.
+// `value` as pretty JSON. File names are bytes, not always UTF-8: a byte that is not is written as U+FFFD
+// rather than failing the whole command after its work is done.
+std::string json_text(const nlohmann::json& value);
+
+// Writes `report` as pretty JSON (json_text) to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
 
 double seconds_since(std::chrono::steady_clock::time_point start);

@@ -116,7 +116,7 @@ void add_compare_command(CLI::App& app) {
       write_json_report(flags->report, report);
     }
     if (flags->json) {
-      std::printf("%s\n", out.dump(2).c_str());
+      std::printf("%s\n", json_text(out).c_str());
       return;
     }
     std::printf("original    %s: %zu vertices, %zu faces, bounding-box diagonal %g\n",

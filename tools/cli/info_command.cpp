@@ -51,7 +51,7 @@ void add_info_command(CLI::App& app) {
     out["duplicate_faces"] = topo.duplicate_faces;
     out["unreferenced_vertices"] = topo.unreferenced_vertices;
     if (*json) {
-      std::printf("%s\n", out.dump(2).c_str());
+      std::printf("%s\n", json_text(out).c_str());
       return;
     }
     std::printf("%s (%s)\n", input->c_str(), format_name(format));

@@ -455,7 +455,8 @@ std::string bench_json(const std::vector<BenchResult>& results, const BenchOptio
     }
     out["results"].push_back(std::move(row));
   }
-  return out.dump(2) + "\n";
+  // The mesh's name comes from its file name, which need not be UTF-8: such bytes become U+FFFD.
+  return out.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace ocsimp
