@@ -25,8 +25,8 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   levels              largest first: [{target_faces, faces, vertices, file, seconds, max_error, level_max_error,
                       target_reached, stop}], and target_ratio with --ratios; max_error is the largest
                       collapse cost down the chain up to this level, or the clustering stage's vertex error
-                      where larger, as a distance to the original surface (carried quadrics); level_max_error
-                      is this level's own run's largest cost
+                      where larger, as an RMS distance to the original's planes (carried quadrics; not a
+                      Hausdorff bound); level_max_error is this level's own run's largest cost
   phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}]: open, read or cluster,
                       then "level N" per level (decimating it and writing its file))";
 

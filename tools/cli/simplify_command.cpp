@@ -24,8 +24,9 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   intermediate_faces  faces after clustering (0 when not clustered)
   memory_limit_bytes  the budget in force; peak_rss_bytes the process's peak resident memory
   seconds             wall time of the whole run
-  max_error           the result's largest error as a distance to the original surface in model units: the
-                      largest collapse cost applied, or a clustered vertex's own error where larger
+  max_error           the result's largest error in model units, as an area-weighted RMS distance to the
+                      original's planes (not a Hausdorff bound): the largest collapse cost applied, or a
+                      clustered vertex's own error where larger
   cluster_error       that error of the clustering stage's vertices alone (0 when not clustered)
   target_reached, stop, reason   how the decimator stopped (see ocsimp decimate)
   phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}] for open, read or
@@ -56,7 +57,10 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
       ->check(fraction())
       ->excludes(faces);
-  cmd->add_option("--max-error", o.max_error, "Largest collapse cost allowed, as a distance in model units")
+  cmd->add_option(
+         "--max-error", o.max_error,
+         "Largest collapse cost allowed, as a distance in model units (an area-weighted RMS distance to "
+         "the original's planes, as in ocsimp decimate: not a bound on the Hausdorff distance)")
       ->check(non_negative_number(true));
   cmd->add_option(
          "--memory-limit", flags->memory_limit,
