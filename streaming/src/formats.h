@@ -33,11 +33,13 @@ std::unique_ptr<TriangleStream> open_within_budget(const std::string& path, File
 
 // Per-corner attributes onto vertices, which hold one each: vertex v takes the value of the first corner that
 // references it. `state` (one entry per vertex, 0 at first) records that it has one (1) and whether a later
-// corner disagreed (2); each vertex that disagrees adds one to `disagreeing`, once.
+// corner disagreed (2); each vertex that disagrees adds one to `disagreeing`, once. A reader may mark a
+// vertex kCornerWithout while only corners without the attribute reference it.
+constexpr std::uint8_t kCornerWithout = 3;
 template <class T>
 void take_first_corner(std::vector<std::uint8_t>& state, std::vector<T>& values, std::size_t v,
                        const T& value, std::uint64_t& disagreeing) {
-  if (state[v] == 0) {
+  if (state[v] == 0 || state[v] == kCornerWithout) {
     state[v] = 1;
     values[v] = value;
   } else if (state[v] == 1 && values[v] != value) {

@@ -428,7 +428,8 @@ class ObjStream final : public TriangleStream {
   // those whose later corners disagree are counted for ReadOptions::warn.
   void assign_attributes() {
     const std::size_t n = vertices_.positions.size();
-    std::vector<std::uint8_t> has_uv, has_normal;
+    std::vector<std::uint8_t> has_uv(uv_records_.empty() ? 0 : n, 0),
+        has_normal(normal_records_.empty() ? 0 : n, 0);
     std::uint64_t uv_seams = 0, hard_edges = 0;
     std::string_view line;
     while (next_statement(line)) {
@@ -447,18 +448,16 @@ class ObjStream final : public TriangleStream {
           parse_face(rest, line.data() + line.size());
           for (const Corner& c : corners_) {
             if (c.vt != kNone) {
-              if (has_uv.empty()) {
-                has_uv.assign(n, 0);
-                vertices_.uvs.assign(n, Vec2f::Zero());
-              }
+              if (vertices_.uvs.empty()) vertices_.uvs.assign(n, Vec2f::Zero());
               take_first_corner(has_uv, vertices_.uvs, c.v, uv_records_[c.vt], uv_seams);
+            } else if (!has_uv.empty() && has_uv[c.v] == 0) {
+              has_uv[c.v] = kCornerWithout;
             }
             if (c.vn != kNone) {
-              if (has_normal.empty()) {
-                has_normal.assign(n, 0);
-                vertices_.normals.assign(n, Vec3f::Zero());
-              }
+              if (vertices_.normals.empty()) vertices_.normals.assign(n, Vec3f::Zero());
               take_first_corner(has_normal, vertices_.normals, c.v, normal_records_[c.vn], hard_edges);
+            } else if (!has_normal.empty() && has_normal[c.v] == 0) {
+              has_normal[c.v] = kCornerWithout;
             }
           }
           break;
@@ -470,6 +469,24 @@ class ObjStream final : public TriangleStream {
     uv_records_ = {};
     normal_records_ = {};
     if (warn_ && uv_seams + hard_edges > 0) warn_(merged_corners_note(uv_seams, hard_edges));
+    // A file where only some faces give vt or vn: the vertices only those without reference get made-up
+    // values, which simplification then blends into the real ones.
+    auto without = [](const std::vector<std::uint8_t>& state, bool kept) {
+      return kept ? static_cast<std::uint64_t>(std::count(state.begin(), state.end(), kCornerWithout)) : 0;
+    };
+    const std::uint64_t no_uv = without(has_uv, !vertices_.uvs.empty()),
+                        no_normal = without(has_normal, !vertices_.normals.empty());
+    if (warn_ && no_uv + no_normal > 0) {
+      auto part = [](std::uint64_t k, const char* what, const char* given) {
+        return std::to_string(k) + (k == 1 ? " vertex is" : " vertices are") +
+               " used only by faces without " + what + " and " + (k == 1 ? "gets " : "get ") + given;
+      };
+      std::string note;
+      if (no_uv > 0) note = part(no_uv, "texture coordinates (vt)", "(0, 0)");
+      if (no_normal > 0)
+        note += (note.empty() ? "" : "; ") + part(no_normal, "normals (vn)", "a zero normal");
+      warn_(note);
+    }
   }
 
   ByteReader reader_;

@@ -123,6 +123,34 @@ TEST(Obj, SaysHowManyVerticesItsCornersDisagreeOn) {
   EXPECT_TRUE(told.empty()) << told[0];
 }
 
+// Where only some faces give vt or vn, the vertices no such corner references get (0, 0) and zero normals,
+// which simplification blends into the real ones: the reader says how many. A vertex that some corner gives a
+// value is not counted, whichever corner comes first.
+TEST(Obj, SaysHowManyVerticesOnlyFacesWithoutAttributesUse) {
+  TempDir dir;
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  test::write_file_bytes(dir / "half.obj",
+                         "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 1 0\nvt 0.5 0.5\nvn 0 0 1\n"
+                         "f 2 4 3\nf 1/1/1 2/1/1 3/1/1\nf 2 5 4\n");
+  const IndexedMesh m = read_mesh(dir / "half.obj", options);
+  EXPECT_EQ(m.uvs, (std::vector<Vec2f>{{0.5f, 0.5f}, {0.5f, 0.5f}, {0.5f, 0.5f}, {0, 0}, {0, 0}}));
+  EXPECT_EQ(m.normals[1], Vec3f(0, 0, 1));
+  EXPECT_EQ(m.normals[4], Vec3f::Zero());
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_EQ(
+      told[0],
+      "2 vertices are used only by faces without texture coordinates (vt) and get (0, 0); 2 vertices are "
+      "used only by faces without normals (vn) and get a zero normal");
+  told.clear();
+  test::write_file_bytes(dir / "normals_only.obj",
+                         "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 2 4 3\n");
+  read_mesh(dir / "normals_only.obj", options);
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_EQ(told[0], "1 vertex is used only by faces without normals (vn) and gets a zero normal");
+}
+
 TEST(Obj, NegativeIndicesCountBackFromTheLine) {
   TempDir dir;
   const IndexedMesh m = read_text(dir,
