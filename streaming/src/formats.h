@@ -48,6 +48,13 @@ void take_first_corner(std::vector<std::uint8_t>& state, std::vector<T>& values,
   }
 }
 
+// What ReadOptions::warn is told when `vertices` of them had a floating-point color channel outside [0, 1]
+// (clamped): some writers put 0..255 there, and every such color came out white without a word.
+inline std::string clamped_colors_note(std::uint64_t vertices) {
+  return std::to_string(vertices) + (vertices == 1 ? " vertex has" : " vertices have") +
+         " a floating-point color channel outside 0..1, clamped to it (are the colors on a 0..255 scale?)";
+}
+
 // What ReadOptions::warn is told when face corners gave vertices different texture coordinates
 // (`uv_seam_vertices` of them) or normals (`hard_edge_vertices`); empty when neither.
 inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint64_t hard_edge_vertices) {

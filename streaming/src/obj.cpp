@@ -247,6 +247,7 @@ class ObjStream final : public TriangleStream {
     if (!origin_sample_.settled) settle_origin();  // fewer vertices than the sample
     flush_sink();
     total_ = seen_;
+    if (warn_ && clamped_colors_ > 0) warn_(clamped_colors_note(clamped_colors_));
   }
 
   // Up to `max` numbers into `values` (float or double); returns how many there were.
@@ -283,6 +284,9 @@ class ObjStream final : public TriangleStream {
     }
     const bool has_color = count >= 6;
     const float* rgb = values + (count - 3);
+    if (has_color &&
+        !(rgb[0] >= 0 && rgb[0] <= 1 && rgb[1] >= 0 && rgb[1] <= 1 && rgb[2] >= 0 && rgb[2] <= 1))
+      ++clamped_colors_;
     const Color color =
         has_color ? Color{color_channel(rgb[0]), color_channel(rgb[1]), color_channel(rgb[2]), 255} : kWhite;
     if (vertex_sink_) {
@@ -494,6 +498,7 @@ class ObjStream final : public TriangleStream {
   std::size_t capacity_;
   ProgressFn progress_;
   std::function<void(const std::string&)> warn_;
+  std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside [0, 1]
   // Out of core (ReadOptions::vertex_sink): positions and colors go there a chunk at a time; no vertex array
   // is kept.
   std::function<void(const VertexChunk&)> vertex_sink_;

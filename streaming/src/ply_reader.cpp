@@ -194,10 +194,14 @@ std::size_t scan_points(const float* xyz, std::size_t n, float* lo, float* hi) {
 
 enum class Slot : std::uint8_t { none, x, y, z, nx, ny, nz, red, green, blue, alpha, u, v };
 
+// What color_check says of a floating-point color channel, which spans [0, 1].
+enum class ColorCheck : std::uint8_t { in_range, clamped, not_finite };
+
 struct VertexValues {
   double position[3] = {0, 0, 0};  // as read: made relative to the origin before narrowing to float
   float normal[3] = {0, 0, 0};
   Color color = {0, 0, 0, 255};
+  ColorCheck color_check[4] = {};  // set with each channel's value
   float uv[2] = {0, 0};
 };
 
@@ -220,6 +224,10 @@ void set_value(VertexValues& values, Slot slot, PlyType type, double value) {
     case Slot::blue:
     case Slot::alpha:
       values.color[int(slot) - int(Slot::red)] = color_channel(value, type);
+      values.color_check[int(slot) - int(Slot::red)] =
+          ply_type_is_integer(type) || (value >= 0.0 && value <= 1.0) ? ColorCheck::in_range
+          : std::isfinite(value)                                      ? ColorCheck::clamped
+                                                                      : ColorCheck::not_finite;
       break;
     case Slot::u:
     case Slot::v:
@@ -391,6 +399,7 @@ class PlyStream final : public TriangleStream {
   detail::ByteReader reader_;
   ProgressFn progress_;
   std::function<void(const std::string&)> warn_;
+  std::uint64_t clamped_colors_ = 0;  // vertices with a floating-point color channel outside [0, 1]
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
   // the start: the origin stays zero.
@@ -899,6 +908,7 @@ void PlyStream::load_vertices() {
     settle_origin();  // fewer vertices than the sample
     flush_vertices();
   }
+  if (warn_ && clamped_colors_ > 0) warn_(clamped_colors_note(clamped_colors_));
   report_progress();
 }
 
@@ -920,6 +930,15 @@ void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::u
     refuse("a normal");
   if (vertex_plan_.uvs && !(std::isfinite(values.uv[0]) && std::isfinite(values.uv[1])))
     refuse("a texture coordinate");
+  if (vertex_plan_.colors) {
+    const ColorCheck* check = values.color_check;
+    if (check[0] == ColorCheck::not_finite || check[1] == ColorCheck::not_finite ||
+        check[2] == ColorCheck::not_finite || check[3] == ColorCheck::not_finite)
+      refuse("a color");
+    if (check[0] != ColorCheck::in_range || check[1] != ColorCheck::in_range ||
+        check[2] != ColorCheck::in_range || check[3] != ColorCheck::in_range)
+      ++clamped_colors_;
+  }
   const FilePosition where = ascii_ ? FilePosition::line(line_) : FilePosition::byte(offset);
   if (!origin_sample_.settled) {
     // Also held in double until the origin is chosen from them.

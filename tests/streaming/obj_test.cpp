@@ -123,6 +123,22 @@ TEST(Obj, SaysHowManyVerticesItsCornersDisagreeOn) {
   EXPECT_TRUE(told.empty()) << told[0];
 }
 
+// Vertex colors span [0, 1]; a file on a 0..255 scale came out all white without a word. They are still
+// clamped, and the reader says how many vertices had a channel outside.
+TEST(Obj, SaysHowManyVertexColorsItClamps) {
+  TempDir dir;
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  test::write_file_bytes(dir / "c.obj", "v 0 0 0 200 50 25\nv 1 0 0 0 0.5 1\nv 0 1 0 0 0 0\nf 1 2 3\n");
+  const IndexedMesh m = read_mesh(dir / "c.obj", options);
+  EXPECT_EQ(m.colors, (std::vector<Color>{{255, 255, 255, 255}, {0, 128, 255, 255}, {0, 0, 0, 255}}));
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_EQ(told[0],
+            "1 vertex has a floating-point color channel outside 0..1, clamped to it (are the colors on a "
+            "0..255 scale?)");
+}
+
 // Where only some faces give vt or vn, the vertices no such corner references get (0, 0) and zero normals,
 // which simplification blends into the real ones: the reader says how many. A vertex that some corner gives a
 // value is not counted, whichever corner comes first.

@@ -571,6 +571,30 @@ TEST(PlyTypes, BigEndianMatchesLittleEndian) {
   expect_same_mesh(mesh, read_mesh(dir / "be.ply"));
 }
 
+// Floating-point colors span [0, 1]; some writers put 0..255 in them, and every such color came out white
+// without a word. Values outside are still clamped, and the reader says how many vertices have one.
+TEST(PlyTypes, FloatColorsOutsideZeroToOneAreClampedWithAWarning) {
+  test::TempDir dir;
+  const std::string header =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "property float red\nproperty float green\nproperty float blue\nproperty double alpha\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  write_bytes(dir / "c.ply", header + "0 0 0 200 50 25 1\n1 0 0 0 0.5 1 1\n0 1 0 0 0 -0.25 1\n3 0 1 2\n");
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  const IndexedMesh mesh = read_mesh(dir / "c.ply", options);
+  EXPECT_EQ(mesh.colors, (std::vector<Color>{{255, 255, 255, 255}, {0, 128, 255, 255}, {0, 0, 0, 255}}));
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_EQ(told[0],
+            "2 vertices have a floating-point color channel outside 0..1, clamped to it (are the colors on a "
+            "0..255 scale?)");
+  told.clear();
+  write_bytes(dir / "d.ply", header + "0 0 0 1 0.5 0 1\n1 0 0 0 0.5 1 0\n0 1 0 0 0 0.25 1\n3 0 1 2\n");
+  EXPECT_EQ(read_mesh(dir / "d.ply", options).colors.size(), 3u);
+  EXPECT_TRUE(told.empty()) << told[0];
+}
+
 TEST(PlyTypes, ColorsAsUcharWithoutAlphaGetOpaqueAlpha) {
   test::TempDir dir;
   write_bytes(
@@ -1155,6 +1179,7 @@ const Malformed kMalformed[] = {
     {"cr_line_endings.ply", "end in a carriage return alone"},
     {"binary_nan_normal.ply", "vertex 1 has a normal that is not a finite float"},
     {"ascii_inf_uv.ply", "vertex 2 has a texture coordinate that is not a finite float"},
+    {"ascii_inf_color.ply", "vertex 2 has a color that is not a finite float"},
     {"ascii_texcoord_count.ply", "texcoord holds 4 numbers for 3 corners (two a corner) in record 1"},
     {"ascii_texcoord_nan.ply", "a texture coordinate that is not a finite float in record 0"},
 };
