@@ -303,6 +303,36 @@ TEST(Cli, ConvertToDracoSaysWhichFacesItLosesAndOthersLoseNone) {
   EXPECT_EQ(read_mesh(dir / "out.ply").face_count(), 10u);
 }
 
+// STL holds no vertex attribute and OBJ no color alpha: they were dropped without a word. Formats that hold
+// them say nothing.
+TEST(Cli, WritingAFormatWithoutPlaceForAnAttributeSaysWhichIsLost) {
+  test::TempDir dir;
+  IndexedMesh mesh = test::grid_square(2);
+  mesh.normals.assign(mesh.positions.size(), Vec3f(0, 0, 1));
+  mesh.colors.assign(mesh.positions.size(), Color{10, 20, 30, 255});
+  mesh.uvs.assign(mesh.positions.size(), Vec2f(0.5f, 0.5f));
+  const std::string in = dir / "in.ply";
+  write_mesh(in, mesh);
+  const CommandResult stl = run("convert -q " + in + " " + (dir / "out.stl"), dir);
+  EXPECT_EQ(stl.exit_code, 0) << stl.err;
+  EXPECT_EQ(stl.err,
+            "ocsimp: warning: " + (dir / "out.stl") +
+                ": STL has no place for the mesh's normals, colors and texture coordinates: not written\n");
+  for (const char* name : {"out.obj", "out.drc", "out.ply"}) {
+    const CommandResult r = run("convert -q " + in + " " + (dir / name), dir);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(r.err.empty()) << name << ": " << r.err;
+  }
+  for (Color& c : mesh.colors) c[3] = 100;
+  write_mesh(in, mesh);
+  const CommandResult obj = run("decimate -q " + in + " -o " + (dir / "out.obj") + " --faces 4", dir);
+  EXPECT_EQ(obj.exit_code, 0) << obj.err;
+  EXPECT_NE(obj.err.find("out.obj: OBJ has no place for the mesh's color alpha: not written"),
+            std::string::npos)
+      << obj.err;
+  EXPECT_EQ(lines(obj.err), 1u) << obj.err;
+}
+
 // An input without faces is refused as every other command refuses it, not written empty under a warning
 // that "every triangle collapsed".
 TEST(Cli, ClusterRefusesAnInputWithoutFaces) {

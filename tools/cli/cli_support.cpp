@@ -218,6 +218,24 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
                  "ocsimp: warning: %s has no faces (%zu vertices): only info and convert read such a file\n",
                  path.c_str(), mesh.positions.size());
   }
+  // What the format has no place for: lost without a word, the user had no reason to look.
+  std::vector<const char*> parts;
+  if (format == FileFormat::stl) {
+    if (mesh.has_normals()) parts.push_back("normals");
+    if (mesh.has_colors()) parts.push_back("colors");
+    if (mesh.has_uvs()) parts.push_back("texture coordinates");
+  } else if (format == FileFormat::obj && mesh.has_colors() &&
+             std::any_of(mesh.colors.begin(), mesh.colors.end(),
+                         [](const Color& c) { return c[3] != 255; })) {
+    parts.push_back("color alpha");  // OBJ's "v x y z r g b" has no fourth channel
+  }
+  if (!parts.empty()) {
+    std::string lost;
+    for (std::size_t i = 0; i < parts.size(); ++i)
+      lost.append(i == 0 ? "" : i + 1 == parts.size() ? " and " : ", ").append(parts[i]);
+    std::fprintf(stderr, "ocsimp: warning: %s: %s has no place for the mesh's %s: not written\n",
+                 path.c_str(), format_name(format), lost.c_str());
+  }
   if (format == FileFormat::drc) {
     // Draco's encoder leaves them out, without a word of its own.
     const auto repeated = std::count_if(mesh.triangles.begin(), mesh.triangles.end(), has_repeated_corner);
