@@ -160,6 +160,26 @@ TEST(Cli, GenIsDeterministicAndInfoCountsIt) {
   EXPECT_EQ(j["components"].get<long>(), 1);
 }
 
+// A face of three distinct corners at collinear or coincident positions spans no area, which "degenerate
+// faces" (a repeated corner index) did not count: a Draco file quantized to 1 bit read as 0 degenerate faces.
+TEST(Cli, InfoCountsZeroAreaFacesApartFromRepeatedCorners) {
+  test::TempDir dir;
+  IndexedMesh mesh = test::grid_square(2);  // 9 vertices, 8 faces
+  mesh.positions.push_back({0.5f, 0.5f, 0.0f});
+  mesh.positions.push_back({2.0f, 2.0f, 0.0f});
+  mesh.triangles.push_back({0, 9, 10});  // on the diagonal y = x
+  mesh.triangles.push_back({4, 9, 9});   // a repeated corner
+  mesh.triangles.push_back({4, 9, 0});   // corners 4 and 9 coincide
+  write_mesh(dir / "m.ply", mesh);
+  const CommandResult info = run("info --json " + (dir / "m.ply"), dir);
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json j = nlohmann::json::parse(info.out);
+  EXPECT_EQ(j["degenerate_faces"].get<long>(), 1);
+  EXPECT_EQ(j["zero_area_faces"].get<long>(), 2);
+  const CommandResult text = run("info " + (dir / "m.ply"), dir);
+  EXPECT_NE(text.out.find("  zero-area faces        2\n"), std::string::npos) << text.out;
+}
+
 // File names are bytes. One that is not UTF-8 made every JSON output fail after the work was done (exit 1,
 // and a decimated mesh written without its report).
 TEST(Cli, JsonOutputsNameAFileWhoseNameIsNotUtf8) {

@@ -25,6 +25,15 @@ void add_info_command(CLI::App& app) {
     read.warn = make_console(true, *input).warn;
     const IndexedMesh mesh = read_mesh(*input, read);
     const MeshTopology topo = analyze_topology(mesh);
+    // Faces of three distinct corners that still span no area (collinear or coincident positions, as a
+    // coarse quantization leaves them): degenerate_faces counts repeated corner indices only.
+    const auto zero_area =
+        std::count_if(mesh.triangles.begin(), mesh.triangles.end(), [&](const Triangle& t) {
+          if (has_repeated_corner(t)) return false;
+          const Vec3d a = mesh.positions[t[0]].cast<double>();
+          return (mesh.positions[t[1]].cast<double>() - a).cross(mesh.positions[t[2]].cast<double>() - a) ==
+                 Vec3d::Zero();
+        });
     Box3 box = mesh.bounds();  // in the file's coordinates
     box.lo += mesh.origin;
     box.hi += mesh.origin;
@@ -48,6 +57,7 @@ void add_info_command(CLI::App& app) {
     out["inconsistently_oriented_edges"] = topo.inconsistent_edges;
     out["components"] = topo.components;
     out["degenerate_faces"] = topo.degenerate_faces;
+    out["zero_area_faces"] = zero_area;
     out["duplicate_faces"] = topo.duplicate_faces;
     out["unreferenced_vertices"] = topo.unreferenced_vertices;
     if (*json) {
@@ -77,7 +87,8 @@ void add_info_command(CLI::App& app) {
     std::printf("  non-manifold vertices  %zu\n", topo.non_manifold_vertices);
     std::printf("  misoriented edges      %zu\n", topo.inconsistent_edges);
     std::printf("  components             %zu\n", topo.components);
-    std::printf("  degenerate faces       %zu\n", topo.degenerate_faces);
+    std::printf("  degenerate faces       %zu (a repeated corner)\n", topo.degenerate_faces);
+    std::printf("  zero-area faces        %td\n", zero_area);
     std::printf("  duplicate faces        %zu\n", topo.duplicate_faces);
     std::printf("  unreferenced vertices  %zu\n", topo.unreferenced_vertices);
   });
