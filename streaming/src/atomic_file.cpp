@@ -85,14 +85,42 @@ std::filesystem::path link_target(const std::string& path) {
   throw Error(path, {}, "too many levels of symbolic links");
 }
 
+// Whether `path` names something other than a regular file or a folder, that writing goes to directly: a
+// device (/dev/null), a FIFO, /dev/stdout. A rename would replace it by a regular file: run as root,
+// `-o /dev/null` made /dev/null a regular file for every process on the machine.
+bool writes_directly(const std::string& path) {
+  struct stat info {};
+  return ::stat(path.c_str(), &info) == 0 && !S_ISREG(info.st_mode) && !S_ISDIR(info.st_mode);
+}
+
+// The longest file name the temporary's decoration leaves room for: a name a few bytes under the file
+// system's limit of 255 (NAME_MAX) is valid, but its temporary was not.
+constexpr std::size_t kTempDecoration = std::string_view(".").size() + std::string_view(".tmp.XXXXXX").size();
+constexpr std::size_t kNameMax = 255;
+
 }  // namespace
 
-AtomicFile::AtomicFile(std::string path)
-    : path_(std::move(path)), target_path_(link_target(path_).string()), buffer_(buffer_capacity) {
+void check_writable(const std::string& path) {
+  if (writes_directly(path)) {
+    if (::access(path.c_str(), W_OK) != 0) throw Error(path, {}, system_reason("cannot write"));
+    return;
+  }
+  AtomicFile probe(path);  // creates, then (uncommitted) deletes, a temporary beside the destination
+}
+
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), buffer_(buffer_capacity) {
+  if (writes_directly(path_)) {
+    direct_ = true;
+    target_path_ = path_;
+    fd_ = ::open(path_.c_str(), O_WRONLY | O_CLOEXEC);
+    if (fd_ < 0) throw Error(path_, {}, system_reason("cannot open for writing"));
+    return;
+  }
+  target_path_ = link_target(path_).string();
   const std::filesystem::path target(target_path_);
   const std::filesystem::path folder = target.parent_path().empty() ? "." : target.parent_path();
   std::string temp_name(".");
-  temp_name.append(target.filename().string()).append(".tmp.XXXXXX");
+  temp_name.append(target.filename().string().substr(0, kNameMax - kTempDecoration)).append(".tmp.XXXXXX");
   std::string pattern = (folder / temp_name).string();
   fd_ = mkstemp(pattern.data());
   if (fd_ < 0) throw Error(path_, {}, system_reason("cannot create a temporary file in " + folder.string()));
@@ -103,6 +131,7 @@ AtomicFile::AtomicFile(std::string path)
 AtomicFile::~AtomicFile() {
   if (!committed_) {
     if (fd_ >= 0) ::close(fd_);
+    if (direct_) return;
     ::unlink(temp_path_.c_str());
     unregister_live(temp_path_);
   }
@@ -146,6 +175,13 @@ void AtomicFile::flush() {
 
 void AtomicFile::commit() {
   flush();
+  if (direct_) {
+    const int fd = fd_;
+    fd_ = -1;
+    if (::close(fd) != 0) throw Error(path_, {}, system_reason("close failed"));
+    committed_ = true;
+    return;
+  }
   // A file replaced keeps its permissions (a private 0600 output stays private); a new one gets the usual
   // ones, where mkstemp made it 0600.
   struct stat existing {};

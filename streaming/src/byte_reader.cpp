@@ -13,7 +13,9 @@
 namespace ocsimp::detail {
 
 ByteReader::ByteReader(std::string path, std::size_t capacity) : path_(std::move(path)) {
-  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  // Without O_NONBLOCK, opening a FIFO that no process writes waits for one forever, before the check below
+  // could refuse it. A regular file's reads ignore the flag.
+  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd_ < 0) throw Error(path_, {}, std::string("cannot open: ") + std::strerror(errno));
   struct stat info {};
   if (::fstat(fd_, &info) != 0 || !S_ISREG(info.st_mode)) {

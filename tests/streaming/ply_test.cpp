@@ -324,6 +324,18 @@ TEST(PlyStreamWriter, AReplacedFileKeepsItsPermissions) {
 
 // An output path that is a symbolic link used to be renamed over: the link became a regular file and its
 // target kept the old mesh. Writing goes through the links now, as a shell redirection does.
+// A name up to the file system's 255 bytes is valid, but from 244 bytes on its temporary's decoration (a
+// dot before, ".tmp.XXXXXX" after) went past the limit, and writing failed.
+TEST(PlyStreamWriter, AnOutputNameOfTheLongestLengthIsWritten) {
+  test::TempDir dir;
+  for (std::size_t length : {243u, 244u, 255u}) {
+    const std::string name = std::string(length - 4, 'n') + ".ply";
+    write_mesh(dir / name, test::grid_square(2));
+    EXPECT_EQ(read_mesh(dir / name).face_count(), 8u) << length;
+  }
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator()), 3);
+}
+
 TEST(PlyStreamWriter, AnOutputThatIsASymbolicLinkIsWrittenThroughIt) {
   test::TempDir dir;
   const std::string real = dir / "real.ply", link = dir / "link.ply", chain = dir / "chain.ply";

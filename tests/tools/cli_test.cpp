@@ -1,6 +1,7 @@
 // The `ocsimp` binary end to end: exit codes, one-line errors, atomic outputs, determinism of `gen`.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -351,6 +352,44 @@ TEST(Cli, WritingAFormatWithoutPlaceForAnAttributeSaysWhichIsLost) {
             std::string::npos)
       << obj.err;
   EXPECT_EQ(lines(obj.err), 1u) << obj.err;
+}
+
+// What is neither a regular file nor a folder is written as a stream. Renaming a temporary over it made it a
+// regular file: run as root, `-o` or `--report` to /dev/null replaced the machine's /dev/null. A FIFO stands
+// in for the device here; its reader would wait forever for a writer that renamed it away, hence timeout.
+TEST(Cli, AFifoOrAPipeIsWrittenAsAStreamAndNeverReplaced) {
+  test::TempDir dir;
+  const std::string in = dir / "in.ply", fifo = dir / "out.ply", copy = dir / "copy.ply";
+  write_mesh(in, test::sphere(2));
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string command = "timeout 20 cat " + fifo + " > " + copy + " & reader=$!; " + kOcsimp +
+                              " convert -q " + in + " " + fifo + " 2>" + (dir / "err.txt") +
+                              "; r=$?; wait $reader; exit $r";
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << file_bytes(dir / "err.txt");
+  struct stat info {};
+  ASSERT_EQ(::stat(fifo.c_str(), &info), 0);
+  EXPECT_TRUE(S_ISFIFO(info.st_mode));
+  EXPECT_EQ(read_mesh(copy).face_count(), test::sphere(2).face_count());
+
+  // A report to /dev/stdout, which is a pipe here: it could not even make its temporary.
+  const std::string report = dir / "r.json";
+  const std::string piped = kOcsimp + " cluster -q " + in + " -o " + (dir / "c.ply") +
+                            " --grid 4 --report /dev/stdout | cat > " + report;
+  ASSERT_EQ(std::system(piped.c_str()), 0);
+  EXPECT_GT(nlohmann::json::parse(file_bytes(report))["output"]["faces"].get<long>(), 0);
+}
+
+// Opening a FIFO that no process writes waited for one forever, before "not a regular file" could be said.
+TEST(Cli, AFifoWithoutAWriterIsRefusedAsInput) {
+  test::TempDir dir;
+  const std::string fifo = dir / "in.ply";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string err = dir / "err.txt";
+  const int status = std::system(("timeout 20 " + kOcsimp + " info " + fifo + " 2>" + err).c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 2) << "124 is timeout's";
+  EXPECT_NE(file_bytes(err).find("in.ply: not a regular file"), std::string::npos) << file_bytes(err);
 }
 
 // An input without faces is refused as every other command refuses it, not written empty under a warning

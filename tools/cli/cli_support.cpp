@@ -250,7 +250,7 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
 void check_destination(const std::string& path) {
   std::error_code error;
   if (std::filesystem::is_directory(path, error)) throw Error(path, {}, "is a folder, not a file name");
-  AtomicFile probe(path);  // creates, then (uncommitted) deletes, a temporary beside the destination
+  check_writable(path);
 }
 
 FileFormat check_mesh_destination(const std::string& path) {

@@ -13,6 +13,9 @@ namespace ocsimp {
 // over the target; destruction without commit() (an exception, an early return) deletes the temporary. A
 // SIGINT/SIGTERM/SIGHUP handler deletes every live temporary before the process dies. A path that is a
 // symbolic link is written through: the target is the file at the end of its links, and they stay links.
+// A path that exists as neither a regular file nor a folder (a device such as /dev/null, a FIFO,
+// /dev/stdout on a pipe) is written directly, as a stream: no rename could replace it, and what was sent
+// before a failure stays sent.
 class AtomicFile {
  public:
   explicit AtomicFile(std::string path);
@@ -43,6 +46,12 @@ class AtomicFile {
   std::size_t used_ = 0;
   std::uint64_t flushed_ = 0;
   bool committed_ = false;
+  bool direct_ = false;  // writing straight to path_ (not a regular file), no temporary
 };
+
+// Throws the error that writing `path` would meet, before any work: creates and deletes a temporary beside
+// it, or, for a path written directly (see AtomicFile), checks it is writable without opening it (opening a
+// FIFO would wait for its reader, and closing it end that reader's input).
+void check_writable(const std::string& path);
 
 }  // namespace ocsimp
