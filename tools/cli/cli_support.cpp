@@ -169,6 +169,14 @@ Console make_console(bool quiet, const std::string& input) {
   return console;
 }
 
+void warn_if_over_memory_limit(const Console& console, std::uint64_t memory_limit) {
+  const std::uint64_t peak = peak_rss_bytes();
+  if (memory_limit > 0 && peak > memory_limit && console.warn) {
+    console.warn("the run's peak memory, " + format_bytes(peak) + ", went over the memory limit of " +
+                 format_bytes(memory_limit));
+  }
+}
+
 std::unique_ptr<tbb::global_control> limit_threads(int threads) {
   if (threads <= 0) return nullptr;
   return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,

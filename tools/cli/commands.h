@@ -55,6 +55,11 @@ struct Console {
 };
 Console make_console(bool quiet, const std::string& input);
 
+// Warns through `console` when the process's peak memory went over `memory_limit`: the pipeline plans its
+// stages from measured bytes per cell, and a grid that comes out larger than planned, or an input unlike
+// those measured, can pass the limit after a plan that fit, or past the overshoot it announced.
+void warn_if_over_memory_limit(const Console& console, std::uint64_t memory_limit);
+
 // Writes a simplified mesh to `path` (atomically, as write_mesh does), and warns on stderr, even with
 // --quiet, when it has no faces: every triangle collapsed, as on an input too thin for the resolution or with
 // a target below what its topology allows, or on converting a file without faces. The vertices are still

@@ -162,6 +162,7 @@ void add_lod_command(CLI::App& app) {
     const auto start = std::chrono::steady_clock::now();
     const LodResult result = lod(flags->input, options);
     const double total = seconds_since(start);
+    warn_if_over_memory_limit(console, result.memory_limit);
 
     if (!flags->report.empty()) {
       nlohmann::json report;

@@ -107,6 +107,7 @@ void add_simplify_command(CLI::App& app) {
     result.phases.push_back({"write", seconds_since(write_start), result.mesh.face_count(),
                              result.mesh.face_count(), peak_rss_bytes()});
     const double total = seconds_since(start);
+    warn_if_over_memory_limit(console, result.memory_limit);
 
     if (!flags->report.empty()) {
       nlohmann::json report;
