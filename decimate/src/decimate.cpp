@@ -483,6 +483,7 @@ struct Decimator {
           box.add(Vec3f(x.p[0], x.p[1], x.p[2]));
           ++verts_alive;
         }
+        if (x.seg_count == 1) ++stats.single_face_vertices;
       });
     }
     stats.input_vertices = verts_alive;
@@ -2535,6 +2536,15 @@ struct Decimator {
 std::uint64_t ratio_target(double ratio, std::uint64_t faces) {
   return std::max<std::uint64_t>(
       1, static_cast<std::uint64_t>(std::llround(ratio * static_cast<double>(faces))));
+}
+
+std::string separate_faces_note(const DecimateStats& stats, bool welded) {
+  // Below a few faces, a mesh of separate triangles is likely meant (a test, a marker).
+  if (stats.input_faces < 4 || 2 * stats.single_face_vertices <= stats.input_vertices) return "";
+  return std::to_string(stats.single_face_vertices) + " of the " + std::to_string(stats.input_vertices) +
+         " vertices each belong to a single face, as in a triangle soup: such faces decimate as separate "
+         "pieces, each removed whole, so the surface falls apart" +
+         (welded ? "" : "; --weld joins vertices at equal positions first");
 }
 
 const char* stop_name(DecimateStop stop) {

@@ -697,6 +697,17 @@ TEST(Decimate, WeldJoinsDuplicatedVertices) {
   const DecimateResult loose = run(soup, o);
   EXPECT_EQ(loose.mesh.face_count(), 400u);
   EXPECT_EQ(loose.mesh.vertex_count(), 1200u);
+  // The stats tell the two apart, and so does the note the commands print.
+  EXPECT_EQ(loose.stats.single_face_vertices, soup.vertex_count());
+  EXPECT_EQ(welded.stats.single_face_vertices, 0u);
+  EXPECT_EQ(separate_faces_note(welded.stats, true), "");
+  EXPECT_EQ(separate_faces_note(run(sphere, o).stats, false), "");
+  EXPECT_EQ(
+      separate_faces_note(loose.stats, false),
+      std::to_string(soup.vertex_count()) + " of the " + std::to_string(soup.vertex_count()) +
+          " vertices each belong to a single face, as in a triangle soup: such faces decimate as separate "
+          "pieces, each removed whole, so the surface falls apart; --weld joins vertices at equal "
+          "positions first");
 }
 
 TEST(Decimate, PairDistanceJoinsNearbyParts) {

@@ -100,6 +100,8 @@ void add_decimate_command(CLI::App& app) {
     const auto decimate_start = std::chrono::steady_clock::now();
     DecimateResult result = decimate(std::move(input), options);
     const double decimate_seconds = seconds_since(decimate_start);
+    if (const std::string note = separate_faces_note(result.stats, options.weld); !note.empty())
+      console.warn(note);
     const auto write_start = std::chrono::steady_clock::now();
     WriteOptions write;
     write.ascii = flags->ascii;
@@ -117,6 +119,7 @@ void add_decimate_command(CLI::App& app) {
                          {"faces_used", s.input_faces},
                          {"vertices_used", s.input_vertices},
                          {"welded_vertices", s.welded_vertices},
+                         {"single_face_vertices", s.single_face_vertices},
                          {"dropped_degenerate_faces", s.dropped_degenerate_faces}};
       report["output"] = {{"file", flags->output}, {"vertices", s.vertices}, {"faces", s.faces}};
       report["options"] = {{"target_faces", options.target_faces},

@@ -123,6 +123,9 @@ struct DecimateStats {
   std::uint64_t target_faces = 0;     // effective face target (0: none)
   std::uint64_t target_vertices = 0;  // effective vertex target (0: none)
   std::uint64_t welded_vertices = 0;  // vertices merged into another by `weld`
+  // Vertices only one face uses: nearly all of them in a triangle soup (each face its own three vertices,
+  // as some exporters write), whose faces decimate as separate pieces (see separate_faces_note).
+  std::uint64_t single_face_vertices = 0;
   std::uint64_t dropped_degenerate_faces = 0;
   // Rejections of the candidate at the top of the queue, over the whole run.
   std::uint64_t rejected_flip = 0;      // would flip, degenerate or double a surrounding triangle
@@ -168,5 +171,10 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options);
 std::uint64_t ratio_target(double ratio, std::uint64_t faces);
 
 const char* stop_name(DecimateStop stop);
+
+// A warning for a run on a mesh most of whose vertices belong to a single face (a triangle soup): such faces
+// share no edge, so the decimator removes them whole and the result is scattered triangles, however small
+// its collapse costs; empty otherwise. `welded`: the run had DecimateOptions::weld.
+std::string separate_faces_note(const DecimateStats& stats, bool welded);
 
 }  // namespace ocsimp
