@@ -698,7 +698,9 @@ TEST(Cli, LodTakesItsLevelsAsRatiosOfTheFacesRead) {
     EXPECT_EQ(level["file"], file);
   }
   // One list or the other, of ratios in (0, 1]; each refusal one line, before any output.
-  for (const std::string levels : {"--faces 100 --ratios 0.1", "--ratios 0.1,1.5", "--ratios 0.1,x", ""}) {
+  // A comma at either end, or two together, leaves an empty item: "0.1," was taken as "0.1".
+  for (const std::string levels : {"--faces 100 --ratios 0.1", "--ratios 0.1,1.5", "--ratios 0.1,x", "",
+                                   "--ratios 0.1,", "--ratios ,0.1", "--faces 100,,10", "--faces 100,"}) {
     const CommandResult bad = run("lod " + scan + " -o '" + (dir / "bad_{faces}.ply") + "' " + levels, dir);
     EXPECT_EQ(bad.exit_code, 2) << levels;
     EXPECT_EQ(lines(bad.err), 1u) << levels << ": " << bad.err;

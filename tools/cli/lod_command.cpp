@@ -6,7 +6,6 @@
 #include <functional>
 #include <limits>
 #include <memory>
-#include <sstream>
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
@@ -37,9 +36,11 @@ template <class T, class Parse, class Valid>
 std::vector<T> parse_levels(const std::string& text, const char* flag, const Parse& parse, const Valid& valid,
                             const char* expected) {
   std::vector<T> levels;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) {
+  // Every comma separates two items, so "0.1," has an empty one, as ",0.1" does (getline dropped it).
+  for (std::size_t start = 0; start <= text.size();) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, comma - start);
+    start = comma + 1;
     T value{};
     bool whole = false;
     try {
