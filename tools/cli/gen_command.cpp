@@ -23,7 +23,8 @@ void add_gen_command(CLI::App& app) {
   cmd->add_option("--triangles", flags->options.triangles,
                   "Triangles wanted; the lattice reaches the nearest 12 n^2 per component")
       ->capture_default_str()
-      ->check(whole_number(12, 20'000'000'000));
+      // 12 n^2 at the largest n whose 6 n^2 + 2 vertices 32-bit indices number (n = 26,754).
+      ->check(whole_number(12, 8'589'318'192));
   cmd->add_option("--seed", flags->options.seed, "Random seed (same seed, same bytes)")
       ->capture_default_str()
       ->check(whole_number(0));
