@@ -6,6 +6,7 @@
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
+#include "ocsimp/core/system.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"ocsimp: simplify triangle meshes of any size (streaming clustering + QEM decimation)"};
@@ -46,7 +47,18 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "ocsimp: %s\n", e.what());
     return 2;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "ocsimp: out of memory\n");
+    // One line naming what was being read, as every other error does, and how far memory had got.
+    std::string subject, command_name;
+    for (const CLI::App* command : app.get_subcommands()) {
+      command_name = command->get_name();
+      for (const char* name : {"input", "original"}) {
+        const CLI::Option* option = command->get_option_no_throw(name);
+        if (subject.empty() && option && option->count() > 0) subject = option->as<std::string>() + ": ";
+      }
+    }
+    std::fprintf(
+        stderr, "ocsimp: %sout of memory in %s (the system refused an allocation, at a peak of %s)\n",
+        subject.c_str(), command_name.c_str(), ocsimp::format_bytes(ocsimp::peak_rss_bytes()).c_str());
     return 3;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "ocsimp: %s\n", e.what());
