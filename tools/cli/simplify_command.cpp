@@ -68,12 +68,14 @@ void add_simplify_command(CLI::App& app) {
          "fit beside the clustering is dereferenced on disk under TMPDIR when that takes less memory (a "
          "target far below the input)")
       ->check(byte_size());
-  cmd->add_flag("--two-stage", o.two_stage,
-                "Cluster first even when the input fits in core (an input no larger than the intermediate is "
-                "decimated directly unless --intermediate is given)");
+  cmd->add_flag(
+      "--two-stage", o.two_stage,
+      "Cluster first even when the input fits in core (an input no larger than the intermediate, by "
+      "default at least 262,144 faces, is decimated directly unless --intermediate is given)");
   cmd->add_option(
       "--intermediate", o.intermediate,
-      "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8)");
+      "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8, and at "
+      "least 262,144 faces where the budget has room)");
   cmd->add_flag(
       "--weld", o.decimate.weld,
       "Merge vertices at exactly equal positions before decimating (a triangle soup, as some exporters "

@@ -405,12 +405,16 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   // The decimator kept its own collapses within the bound, but the intermediate it started from was
   // clustered to a size, not to an error.
   if (result.cluster_error > options.max_error) {
-    char text[256];
+    char text[384];
     std::snprintf(text, sizeof text,
                   "the clustering stage's vertices already lie up to %.6g from the original's planes, over "
-                  "--max-error %.6g (an input that fits the memory limit, without --two-stage, is decimated "
-                  "directly)",
-                  result.cluster_error, options.max_error);
+                  "--max-error %.6g (%s)",
+                  result.cluster_error, options.max_error,
+                  options.two_stage
+                      ? "--two-stage clustered it first; without it, an input that fits the memory "
+                        "limit is decimated directly"
+                      : "the input did not fit the memory limit and was clustered first, as finely "
+                        "as the limit allows; a larger --memory-limit keeps more of it");
     result.decimate.target_reached = false;
     result.decimate.reason = text;
   }
