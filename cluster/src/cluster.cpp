@@ -280,9 +280,14 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
                                 : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
     const double fine = std::max(64.0, options.fine_cells_per_target * vertices);
     pass.target_cells = static_cast<std::uint64_t>(std::min(fine, 2e9));
+    // A face target asks for as many fine cells as faces: a thin strip whose cross-section fit in one cell
+    // had more cells than the target's vertices, yet every triangle collapsed within them, and the output
+    // had no face at all.
+    const bool by_faces = !(options.octree && options.target_vertices > 0);
+    const double wanted = by_faces ? static_cast<double>(options.target_faces) : vertices;
     const double needed =
-        options.refine_until_cells > 0 ? static_cast<double>(options.refine_until_cells) : vertices;
-    pass.needed_cells = static_cast<std::uint64_t>(std::min({needed, vertices, 2e9}));
+        options.refine_until_cells > 0 ? static_cast<double>(options.refine_until_cells) : wanted;
+    pass.needed_cells = static_cast<std::uint64_t>(std::min({needed, wanted, fine, 2e9}));
     pass.grid = Grid::power_of_two(bounds, level_for(fine));
   } else if (options.cell_size > 0) {
     pass.grid = Grid::sized(bounds, options.cell_size, stream.path());

@@ -531,6 +531,35 @@ TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
   }
 }
 
+// A long thin strip (100 x 0.1, cells 0.25 x 0.05): the fine grid planned for a surface spanning its box put
+// the strip's width in one cell, every triangle collapsed, and a 500-face target came out with no face at all
+// although the next level holds 800. A face target now asks the fine grid for as many cells as faces.
+TEST(Cluster, OctreeFaceTargetRefinesAThinStripUntilItsFacesSurvive) {
+  IndexedMesh strip;
+  constexpr int kCells = 400;
+  for (int j = 0; j <= 2; ++j)
+    for (int i = 0; i <= kCells; ++i) strip.positions.emplace_back(0.25f * float(i), 0.05f * float(j), 0.0f);
+  auto id = [](int i, int j) { return static_cast<Index>(j * (kCells + 1) + i); };
+  for (int j = 0; j < 2; ++j)
+    for (int i = 0; i < kCells; ++i) {
+      strip.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      strip.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  ClusterOptions options;
+  options.octree = true;
+  options.target_faces = 500;
+  ClusterStats stats;
+  const QuadricMesh out = run(strip, options, &stats);
+  EXPECT_LE(out.mesh.face_count(), 500u);
+  EXPECT_GE(out.mesh.face_count(), 475u);
+  EXPECT_TRUE(stats.target_met);
+  for (const Vec3f& p : out.mesh.positions) {
+    EXPECT_TRUE(p.x() >= -1e-4f && p.x() <= 100.0001f && p.y() >= -1e-4f && p.y() <= 0.1001f &&
+                std::abs(p.z()) < 1e-5f)
+        << p.transpose();
+  }
+}
+
 // A face target stops the very merge sequence a vertex target runs, at the first merge that brings the face
 // count within the target (found by recounting batches of merges and bisecting the batch that crosses it):
 // the result is the vertex-target result of its own vertex count, one merge fewer is over the target, and

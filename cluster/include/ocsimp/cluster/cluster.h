@@ -82,9 +82,10 @@ struct ClusterOptions {
   double fine_cells_per_target = 8;
   // Target-driven modes: refine the fine grid until it holds at least this many cells (or one per distinct
   // point), so that thin shells, far-apart parts and far stray points reach the target too; 0 means as many
-  // as the target has vertices. The pipeline asks for fewer: its intermediate need not be exact, and
-  // refining up to it would undo the cap that keeps the octree fast (a 10 M scan's two-stage run to 1 %:
-  // 2.3 s and 174 MB capped, 4.9 s and 562 MB refined, same result).
+  // as the target has vertices, or, for a face target, faces (a thin strip whose width fit in one cell had
+  // more cells than vertices asked for, and no face survived). The pipeline asks for fewer: its intermediate
+  // need not be exact, and refining up to it would undo the cap that keeps the octree fast (a 10 M scan's
+  // two-stage run to 1 %: 2.3 s and 174 MB capped, 4.9 s and 562 MB refined, same result).
   std::uint64_t refine_until_cells = 0;
 
   Representative representative = Representative::quadric;
