@@ -65,6 +65,20 @@ IndexedMesh triangle_soup(const IndexedMesh& mesh) {
   return soup;
 }
 
+IndexedMesh thin_strip() {
+  IndexedMesh strip;
+  constexpr int kCells = 400;
+  for (int j = 0; j <= 2; ++j)
+    for (int i = 0; i <= kCells; ++i) strip.positions.emplace_back(0.25f * float(i), 0.05f * float(j), 0.0f);
+  auto id = [](int i, int j) { return static_cast<Index>(j * (kCells + 1) + i); };
+  for (int j = 0; j < 2; ++j)
+    for (int i = 0; i < kCells; ++i) {
+      strip.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      strip.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  return strip;
+}
+
 IndexedMesh cube(int n) {
   IndexedMesh mesh;
   std::map<std::array<int, 3>, Index> index_of;  // integer lattice point -> vertex, so faces share edges

@@ -535,16 +535,7 @@ TEST(Cluster, OctreeFaceTargetGivesTheLargestCountNotAbove) {
 // the strip's width in one cell, every triangle collapsed, and a 500-face target came out with no face at all
 // although the next level holds 800. A face target now asks the fine grid for as many cells as faces.
 TEST(Cluster, OctreeFaceTargetRefinesAThinStripUntilItsFacesSurvive) {
-  IndexedMesh strip;
-  constexpr int kCells = 400;
-  for (int j = 0; j <= 2; ++j)
-    for (int i = 0; i <= kCells; ++i) strip.positions.emplace_back(0.25f * float(i), 0.05f * float(j), 0.0f);
-  auto id = [](int i, int j) { return static_cast<Index>(j * (kCells + 1) + i); };
-  for (int j = 0; j < 2; ++j)
-    for (int i = 0; i < kCells; ++i) {
-      strip.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
-      strip.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
-    }
+  const IndexedMesh strip = test::thin_strip();
   ClusterOptions options;
   options.octree = true;
   options.target_faces = 500;

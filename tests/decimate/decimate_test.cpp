@@ -439,16 +439,7 @@ TEST(Decimate, FlatSquareBecomesTwoTrianglesWithExactCorners) {
 // leaves a sliver at cost 0, and the shape penalty, unbounded, made each dearer than the collapses across it,
 // which cost the strip's width. It fell into 6 pieces at 20 faces (26 % Hausdorff), and its 2 faces at 91 %.
 TEST(Decimate, ALongFlatStripDecimatesAlongItsLengthInOnePiece) {
-  IndexedMesh strip;
-  constexpr int kCells = 400;
-  for (int j = 0; j <= 2; ++j)
-    for (int i = 0; i <= kCells; ++i) strip.positions.emplace_back(0.25f * float(i), 0.05f * float(j), 0.0f);
-  auto id = [](int i, int j) { return static_cast<Index>(j * (kCells + 1) + i); };
-  for (int j = 0; j < 2; ++j)
-    for (int i = 0; i < kCells; ++i) {
-      strip.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
-      strip.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
-    }
+  const IndexedMesh strip = test::thin_strip();
   for (std::uint64_t target : {100u, 20u, 2u}) {
     const DecimateResult r = run(strip, faces(target));
     ASSERT_EQ(r.mesh.face_count(), target);
