@@ -251,6 +251,27 @@ TEST(Cli, OutOfMemoryNamesTheInputAndLeavesNoOutput) {
   EXPECT_FALSE(std::filesystem::exists(out));
 }
 
+// A cluster whose every triangle collapsed is left out of the file, and the report said so as the output's
+// "isolated_vertices", which read as vertices of the file: it now counts them under the cells.
+TEST(Cli, ClusterReportCountsClustersLeftOutApartFromTheOutput) {
+  test::TempDir dir;
+  IndexedMesh mesh = test::grid_square(8);
+  const Index base = static_cast<Index>(mesh.positions.size());
+  mesh.positions.insert(mesh.positions.end(),
+                        {{0.5f, 0.5f, 1.0f}, {0.501f, 0.5f, 1.0f}, {0.5f, 0.501f, 1.0f}});
+  mesh.triangles.push_back({base, base + 1, base + 2});  // a speck that collapses into one cell
+  write_mesh(dir / "in.ply", mesh);
+  const std::string out = dir / "out.ply", report = dir / "r.json";
+  ASSERT_EQ(
+      run("cluster -q " + (dir / "in.ply") + " -o " + out + " --grid 4 --report " + report, dir).exit_code,
+      0);
+  const nlohmann::json r = nlohmann::json::parse(file_bytes(report));
+  EXPECT_EQ(r["output"]["vertices"].get<std::size_t>(), read_mesh(out).vertex_count());
+  EXPECT_EQ(r["output"]["isolated_vertices"].get<long>(), 0);
+  EXPECT_EQ(r["cells"]["left_out_without_faces"].get<long>(), 1);
+  EXPECT_EQ(analyze_topology(read_mesh(out)).unreferenced_vertices, 0u);
+}
+
 // File names are bytes. One that is not UTF-8 made every JSON output fail after the work was done (exit 1,
 // and a decimated mesh written without its report).
 TEST(Cli, JsonOutputsNameAFileWhoseNameIsNotUtf8) {

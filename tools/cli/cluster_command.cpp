@@ -117,10 +117,13 @@ void add_cluster_command(CLI::App& app) {
                          {"bytes", input_bytes},
                          {"vertices", stats.input_vertices},
                          {"faces", stats.input_triangles}};
+      // Clusters no face uses are written only where the octree's vertex target counts them or no face is
+      // left; otherwise they are left out, and saying so under "output" read as vertices of the file.
+      const bool kept = (options.octree && options.target_vertices > 0) || stats.output_faces == 0;
       report["output"] = {{"file", flags->output},
                           {"vertices", stats.output_vertices},
                           {"faces", stats.output_faces},
-                          {"isolated_vertices", stats.isolated_vertices}};
+                          {"isolated_vertices", kept ? stats.isolated_vertices : 0}};
       report["options"] = {{"mode", options.octree ? "octree" : "grid"},
                            {"grid", options.grid},
                            {"cell_size", options.cell_size},
@@ -130,13 +133,11 @@ void add_cluster_command(CLI::App& app) {
                            {"boundary", options.preserve_boundary},
                            {"boundary_weight", options.boundary_weight},
                            {"threads", options.threads}};
-      report["cells"] = {{"fine", stats.fine_cells},
-                         {"fine_grid", stats.fine_grid},
-                         {"spanned", stats.spanned_cells},
-                         {"fine_cell_size", stats.fine_cell_size},
-                         {"output", stats.output_vertices},
-                         {"output_grid", stats.output_grid},
-                         {"output_cell_size", stats.output_cell_size}};
+      report["cells"] = {
+          {"fine", stats.fine_cells},         {"fine_grid", stats.fine_grid},
+          {"spanned", stats.spanned_cells},   {"fine_cell_size", stats.fine_cell_size},
+          {"output", stats.output_vertices},  {"left_out_without_faces", kept ? 0 : stats.isolated_vertices},
+          {"output_grid", stats.output_grid}, {"output_cell_size", stats.output_cell_size}};
       report["triangles"] = {{"in", stats.input_triangles},
                              {"collapsed_in_fine_cells", stats.collapsed_triangles},
                              {"repeated_fine_cells", stats.duplicate_triangles},
