@@ -65,6 +65,7 @@
 #include "ocsimp/core/error.h"
 #include "ocsimp/core/system.h"
 #include "placement.h"
+#include "seams.h"
 
 namespace ocsimp {
 namespace {
@@ -235,6 +236,80 @@ Index number_kept(std::size_t n, Index* out, const Keep& keep) {
   return first[chunks];
 }
 
+// A position's bits, with -0 read as +0 so that equal coordinates compare equal.
+struct PositionKey {
+  std::uint32_t bits[3];
+  explicit PositionKey(const Vec3f& p) {
+    for (int a = 0; a < 3; ++a) bits[a] = std::bit_cast<std::uint32_t>(p[a] == 0.0f ? 0.0f : p[a]);
+  }
+  bool operator==(const PositionKey&) const = default;
+  std::uint64_t hash() const {
+    std::uint64_t h = (std::uint64_t{bits[0]} << 32 | bits[1]) * 0x9E3779B97F4A7C15ull;
+    h ^= (h >> 29) + bits[2] * 0xBF58476D1CE4E5B9ull;
+    return h ^ (h >> 32);
+  }
+};
+
+// For each vertex, the lowest index of a vertex at the same position (itself when there is none). Hashing
+// rather than sorting: welding is on by default, so every decimation pays for it, and a sort of the positions
+// took a fifth of a 1 M-triangle decimation. The vertices are first spread over buckets by hash, in index
+// order (chunk counts, then a prefix), and each bucket then fills a small open-addressing table of its own in
+// index order, so the first vertex to claim a position is its lowest one, whatever the thread count.
+std::vector<Index> equal_position_targets(const std::vector<Vec3f>& positions) {
+  const std::size_t n = positions.size();
+  std::vector<Index> target(n);
+  const int bucket_bits = std::clamp(static_cast<int>(std::bit_width(n / 4096)), 0, 12);
+  const std::size_t buckets = std::size_t{1} << bucket_bits;
+  auto bucket_of = [bucket_bits](std::uint64_t h) { return bucket_bits == 0 ? 0 : h >> (64 - bucket_bits); };
+  constexpr std::size_t grain = 65536;
+  const std::size_t chunks = (n + grain - 1) / grain;
+  std::vector<std::uint32_t> count(chunks * buckets, 0);
+  parallel_chunks(n, grain, [&](std::size_t begin, std::size_t end) {
+    std::uint32_t* c = &count[begin / grain * buckets];
+    for (std::size_t v = begin; v < end; ++v) ++c[bucket_of(PositionKey(positions[v]).hash())];
+  });
+  // Bucket-major offsets: bucket b's vertices, chunk by chunk, in index order.
+  std::vector<std::size_t> bucket_begin(buckets + 1, 0);
+  std::vector<std::size_t> at(chunks * buckets);
+  std::size_t sum = 0;
+  for (std::size_t b = 0; b < buckets; ++b) {
+    bucket_begin[b] = sum;
+    for (std::size_t k = 0; k < chunks; ++k) {
+      at[k * buckets + b] = sum;
+      sum += count[k * buckets + b];
+    }
+  }
+  bucket_begin[buckets] = sum;
+  std::vector<Index> by_bucket(n);
+  parallel_chunks(n, grain, [&](std::size_t begin, std::size_t end) {
+    std::size_t* next = &at[begin / grain * buckets];
+    for (std::size_t v = begin; v < end; ++v)
+      by_bucket[next[bucket_of(PositionKey(positions[v]).hash())]++] = static_cast<Index>(v);
+  });
+  tbb::parallel_for(std::size_t{0}, buckets, [&](std::size_t b) {
+    const std::size_t first = bucket_begin[b], size = bucket_begin[b + 1] - first;
+    if (size == 0) return;
+    const std::size_t mask = std::bit_ceil(2 * size) - 1;
+    std::vector<Index> table(mask + 1, kNone);
+    for (std::size_t i = first; i < first + size; ++i) {
+      const Index v = by_bucket[i];
+      const PositionKey key(positions[v]);
+      for (std::size_t slot = key.hash() & mask;; slot = (slot + 1) & mask) {
+        const Index u = table[slot];
+        if (u == kNone) {
+          table[slot] = target[v] = v;
+          break;
+        }
+        if (PositionKey(positions[u]) == key) {
+          target[v] = u;
+          break;
+        }
+      }
+    }
+  });
+  return target;
+}
+
 // Sorts a short list in place (neighbour lists have a handful of entries).
 inline void small_sort(Index* first, Index* last) {
   if (last - first > 32) {
@@ -267,6 +342,12 @@ struct Storage {
   BigVector<Index> vf;  // CSR face lists, one segment per input vertex
   BigVector<Edge> edges;
   std::vector<std::vector<Index>> virtual_pairs;  // per vertex; only with pair_distance
+  // Only when welding joined an attribute seam (see seams.h): the input before welding, and the input face
+  // each face record descends from (moved along by compact).
+  bool seams = false;
+  decimate_detail::SeamSource seam_source;
+  std::vector<Index> face_origin;
+  std::vector<std::uint8_t> welded_at;  // 1 at a vertex others were welded into (until the edges are built)
 };
 
 // Region ids of the first phase (see run_pass): a vertex's region, with kOutside set when a vertex it
@@ -394,8 +475,10 @@ struct Decimator {
     }
     if (opt.weld) weld(in);
     std::size_t kept = 0;
-    for (const Triangle& t : m.triangles) {
+    for (std::size_t f = 0; f < m.triangles.size(); ++f) {
+      const Triangle t = m.triangles[f];
       if (has_repeated_corner(t)) continue;
+      if (storage.seams) storage.face_origin.push_back(static_cast<Index>(f));
       m.triangles[kept++] = t;
     }
     stats.dropped_degenerate_faces = m.triangles.size() - kept;
@@ -403,29 +486,24 @@ struct Decimator {
     if (kept >= first_state / 3) throw Error("decimate: too many faces (" + std::to_string(kept) + ")");
   }
 
-  // Merges vertices at bit-equal positions into the lowest index among them.
+  // Merges vertices at equal positions into the lowest index among them.
   void weld(QuadricMesh& in) {
     IndexedMesh& m = in.mesh;
     const std::size_t n = m.positions.size();
-    std::vector<Index> order(n);
-    std::iota(order.begin(), order.end(), Index{0});
-    const auto& p = m.positions;
-    auto less = [&p](Index a, Index b) {
-      if (p[a].x() != p[b].x()) return p[a].x() < p[b].x();
-      if (p[a].y() != p[b].y()) return p[a].y() < p[b].y();
-      if (p[a].z() != p[b].z()) return p[a].z() < p[b].z();
-      return a < b;
-    };
-    tbb::parallel_sort(order.begin(), order.end(), less);
-    std::vector<Index> target(n);
-    for (std::size_t i = 0; i < n;) {
-      std::size_t j = i + 1;
-      while (j < n && p[order[j]] == p[order[i]]) ++j;
-      for (std::size_t k = i; k < j; ++k) target[order[k]] = order[i];  // order[i] is the lowest index
-      stats.welded_vertices += j - i - 1;
-      i = j;
-    }
+    const std::vector<Index> target = equal_position_targets(m.positions);
+    for (std::size_t v = 0; v < n; ++v) stats.welded_vertices += target[v] != v;
     if (stats.welded_vertices == 0) return;
+    for (std::size_t v = 0; v < n && !storage.seams; ++v) {
+      storage.seams =
+          target[v] != v && decimate_detail::attributes_differ(m, target[v], static_cast<Index>(v));
+    }
+    if (storage.seams) {
+      // The positions and attributes join the source in build(), once the decimator has what it needs.
+      storage.seam_source.triangles = m.triangles;
+      storage.face_origin.reserve(m.triangles.size());
+      storage.welded_at.assign(n, 0);
+      for (std::size_t v = 0; v < n; ++v) storage.welded_at[target[v]] |= target[v] != v;
+    }
     if (!in.quadrics.empty()) {
       for (std::size_t v = 0; v < n; ++v) {
         if (target[v] != v) in.quadrics[target[v]] += in.quadrics[v];
@@ -464,6 +542,20 @@ struct Decimator {
         x.q = Quadric{};
       }
     });
+    if (storage.seams) {
+      // Across a seam the output's attributes come from the input's (see seams.h): the decimator only needs
+      // its own to weigh them (attribute_weight).
+      decimate_detail::SeamSource& source = storage.seam_source;
+      if (opt.attribute_weight > 0) {
+        source.normals = m.normals;
+        source.colors = m.colors;
+        source.uvs = m.uvs;
+      } else {
+        source.normals = std::move(m.normals);
+        source.colors = std::move(m.colors);
+        source.uvs = std::move(m.uvs);
+      }
+    }
     normals = std::move(m.normals);
     colors = std::move(m.colors);
     uvs = std::move(m.uvs);
@@ -508,6 +600,10 @@ struct Decimator {
 
     build_edges();
     build_quadrics(in.quadrics, m.positions);
+    if (storage.seams) {
+      storage.seam_source.positions = std::move(m.positions);
+      std::vector<std::uint8_t>().swap(storage.welded_at);
+    }
     std::vector<Vec3f>().swap(m.positions);
     if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
   }
@@ -530,6 +626,21 @@ struct Decimator {
     Index w, f;
     std::uint32_t slot;
   };
+
+  // Whether the faces on one edge met there in the input only through the weld, as the two sides of a seam:
+  // some face's input vertices at the edge's ends differ from the first face's.
+  bool on_seam(const UpperSide* sides, std::size_t n) const {
+    auto ends = [&](const UpperSide& side) {
+      const Triangle& t = storage.seam_source.triangles[storage.face_origin[side.f]];
+      const Index a = t[side.slot], b = t[side.slot == 2 ? 0 : side.slot + 1];
+      return std::pair(std::min(a, b), std::max(a, b));
+    };
+    const auto first = ends(sides[0]);
+    for (std::size_t k = 1; k < n; ++k) {
+      if (ends(sides[k]) != first) return true;
+    }
+    return false;
+  }
 
   // Marks, in a face's edge slot between the two passes of build_edges, the one side that writes the edge's
   // record.
@@ -593,6 +704,12 @@ struct Decimator {
           } else if (j - i == 2 && is_fold(sides[i].f, sides[i + 1].f)) {
             folds.emplace_back(id, sides[i].f);
             folds.emplace_back(id, sides[i + 1].f);
+          } else if (storage.seams && (storage.welded_at[v] || storage.welded_at[sides[i].w]) &&
+                     on_seam(sides.data() + i, j - i)) {
+            // Each side of a seam keeps the planes it had as a border, so the seam stays where it was: a
+            // seam vertex moved off it would leave the faces of one side reaching across it, their corners
+            // clamped to the side's edge (see seams.h).
+            for (std::size_t k = i; k < j; ++k) folds.emplace_back(id, sides[k].f);
           } else if (const Index sheet = only_face_with_area(sides.data() + i, j - i); sheet != kNone) {
             // Faces of zero area along a border (collinear corners, as CAD exports leave) make it look
             // interior, and it then had no planes to hold it: a flat grid with them along one side went to
@@ -1354,9 +1471,11 @@ struct Decimator {
           }
         },
         [&] {
+          std::vector<Index>& origin_of = storage.face_origin;
           for (std::size_t f = 0; f < nf; ++f) {
             const Face& t = faces[f];
             if (t.v[0] == kNone) continue;
+            if (!origin_of.empty()) origin_of[nf_new] = origin_of[f];
             faces[nf_new++] = {{id[t.v[0]], id[t.v[1]], id[t.v[2]]},
                                {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
                                {t.ref[0], t.ref[1]},
@@ -1380,6 +1499,7 @@ struct Decimator {
     staged_edge = kNone;
     verts.resize(nv_new);
     faces.resize(nf_new);
+    if (!storage.face_origin.empty()) storage.face_origin.resize(nf_new);
     edges.resize(ne_new);
     if (!normals.empty()) normals.resize(nv_new);
     if (!colors.empty()) colors.resize(nv_new);
@@ -2552,10 +2672,15 @@ struct Decimator {
       if (quadrics) quadrics->push_back(absolute(verts[v].q));
     }
     out.triangles.reserve(faces_alive);
-    for (const Face& t : faces) {
+    std::vector<Index> origin_of;
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+      const Face& t = faces[f];
       if (t.v[0] == kNone) continue;
       out.triangles.push_back({remap[t.v[0]], remap[t.v[1]], remap[t.v[2]]});
+      if (storage.seams) origin_of.push_back(storage.face_origin[f]);
     }
+    if (storage.seams)
+      stats.seam_vertices = decimate_detail::restore_seams(storage.seam_source, origin_of, out, quadrics);
     return out;
   }
 };
@@ -2573,7 +2698,7 @@ std::string separate_faces_note(const DecimateStats& stats, bool welded) {
   return std::to_string(stats.single_face_vertices) + " of the " + std::to_string(stats.input_vertices) +
          " vertices each belong to a single face, as in a triangle soup: such faces decimate as separate "
          "pieces, each removed whole, so the surface falls apart" +
-         (welded ? "" : "; --weld joins vertices at equal positions first");
+         (welded ? "" : "; without --no-weld, vertices at equal positions are joined first");
 }
 
 const char* stop_name(DecimateStop stop) {

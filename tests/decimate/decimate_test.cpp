@@ -705,7 +705,7 @@ TEST(Decimate, WeldJoinsDuplicatedVertices) {
   const IndexedMesh sphere = test::sphere(4);
   const IndexedMesh soup = test::triangle_soup(sphere);
   DecimateOptions o = faces(400);
-  o.weld = true;
+  EXPECT_TRUE(o.weld);  // the default
   const DecimateResult welded = run(soup, o);
   EXPECT_EQ(welded.stats.welded_vertices, soup.vertex_count() - sphere.vertex_count());
   EXPECT_EQ(welded.stats.input_vertices, sphere.vertex_count());
@@ -727,8 +727,8 @@ TEST(Decimate, WeldJoinsDuplicatedVertices) {
       separate_faces_note(loose.stats, false),
       std::to_string(soup.vertex_count()) + " of the " + std::to_string(soup.vertex_count()) +
           " vertices each belong to a single face, as in a triangle soup: such faces decimate as separate "
-          "pieces, each removed whole, so the surface falls apart; --weld joins vertices at equal "
-          "positions first");
+          "pieces, each removed whole, so the surface falls apart; without --no-weld, vertices at equal "
+          "positions are joined first");
 }
 
 TEST(Decimate, PairDistanceJoinsNearbyParts) {

@@ -201,9 +201,10 @@ TEST(Cli, SimplifyAndLodSayWhenTheirPeakMemoryWentOverTheLimit) {
   }
 }
 
-// A triangle soup (each face its own three vertices) decimates as separate triangles, each removed whole:
-// simplify to 1 % of a 2 M-triangle soup wrote scattered triangles 32 % of the diagonal from the surface,
-// with a max_error of 0.0012 and no word. Each command that decimates it directly now says so once.
+// A triangle soup (each face its own three vertices) decimates unwelded as separate triangles, each removed
+// whole: simplify to 1 % of a 2 M-triangle soup wrote scattered triangles 32 % of the diagonal from the
+// surface, with a max_error of 0.0012 and no word. Each command that decimates it directly with --no-weld
+// says so once; by default it is welded.
 TEST(Cli, DecimatingATriangleSoupSaysItFallsApart) {
   test::TempDir dir;
   const std::string soup = dir / "soup.ply", mesh = dir / "mesh.ply";
@@ -217,7 +218,7 @@ TEST(Cli, DecimatingATriangleSoupSaysItFallsApart) {
       std::string c = command;
       return c.replace(c.find("IN"), 2, input);
     };
-    const CommandResult loose = run(with(soup), dir);
+    const CommandResult loose = run(with(soup) + " --no-weld", dir);
     EXPECT_EQ(loose.exit_code, 0) << loose.err;
     EXPECT_EQ(lines(loose.err), 1u) << command << "\n" << loose.err;
     EXPECT_NE(loose.err.find("soup.ply: 1536 of the 1536 vertices each belong to a single face"),
@@ -225,6 +226,8 @@ TEST(Cli, DecimatingATriangleSoupSaysItFallsApart) {
         << loose.err;
     const CommandResult welded = run(with(soup) + " --weld", dir);
     EXPECT_TRUE(welded.err.empty()) << command << "\n" << welded.err;
+    const CommandResult by_default = run(with(soup), dir);  // welding is the default
+    EXPECT_TRUE(by_default.err.empty()) << command << "\n" << by_default.err;
     const CommandResult indexed = run(with(mesh), dir);
     EXPECT_TRUE(indexed.err.empty()) << command << "\n" << indexed.err;
   }
@@ -1101,10 +1104,10 @@ TEST(Cli, SimplifySaysWhenTheMemoryLimitIsTooSmallForTheTarget) {
   }
 }
 
-TEST(Cli, SimplifyAndLodWeldATriangleSoupOnRequest) {
-  // A sphere whose every triangle has its own three vertices, as some exporters write it. Without --weld its
-  // faces share no edge and are decimated as separate triangles (90 % of them deleted); welded, it is one
-  // closed surface again.
+TEST(Cli, SimplifyAndLodWeldATriangleSoupByDefault) {
+  // A sphere whose every triangle has its own three vertices, as some exporters write it. With --no-weld its
+  // faces share no edge and are decimated as separate triangles (90 % of them deleted); welded (the
+  // default), it is one closed surface again.
   test::TempDir dir;
   const IndexedMesh sphere = test::sphere(4);
   const std::string input = dir / "soup.ply";
@@ -1114,7 +1117,7 @@ TEST(Cli, SimplifyAndLodWeldATriangleSoupOnRequest) {
     for (bool weld : {false, true}) {
       const std::string output = dir / (command + (weld ? "_welded.ply" : "_soup.ply"));
       const CommandResult r = run(command + " -q " + input + " -o " + output + " --faces " +
-                                      std::to_string(target) + (weld ? " --weld" : ""),
+                                      std::to_string(target) + (weld ? "" : " --no-weld"),
                                   dir);
       ASSERT_EQ(r.exit_code, 0) << r.err;
       const IndexedMesh out = read_mesh(output);

@@ -34,7 +34,10 @@ void add_decimate_command(CLI::App& app) {
              "--faces", o.target_faces,
              "Stop at exactly N faces (N-1 where every collapse left removes two, as on a closed manifold)")
           ->check(whole_number(1));
-  cmd->add_option("--vertices", o.target_vertices, "Stop at exactly N vertices")->check(whole_number(1));
+  cmd->add_option("--vertices", o.target_vertices,
+                  "Stop at exactly N vertices (positions: the copies of one along a texture or normal seam "
+                  "count once)")
+      ->check(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Stop at round(R * input faces) faces, R in (0, 1]")
       ->check(fraction())
       ->excludes(faces);
@@ -64,7 +67,11 @@ void add_decimate_command(CLI::App& app) {
                   "Penalty on collapses across normal, color or uv differences (0: geometry only)")
       ->capture_default_str()
       ->check(non_negative_number());
-  cmd->add_flag("--weld", o.weld, "Merge vertices at exactly equal positions first");
+  cmd->add_flag(
+      "--weld,!--no-weld", o.weld,
+      "Merge vertices at exactly equal positions first, so seams and the corners of a triangle soup "
+      "move as one (default; each side of a texture or normal seam keeps its attributes). "
+      "--no-weld: each copy is a separate border");
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());
@@ -121,7 +128,10 @@ void add_decimate_command(CLI::App& app) {
                          {"welded_vertices", s.welded_vertices},
                          {"single_face_vertices", s.single_face_vertices},
                          {"dropped_degenerate_faces", s.dropped_degenerate_faces}};
-      report["output"] = {{"file", flags->output}, {"vertices", s.vertices}, {"faces", s.faces}};
+      report["output"] = {{"file", flags->output},
+                          {"vertices", s.vertices},
+                          {"seam_vertices", s.seam_vertices},
+                          {"faces", s.faces}};
       report["options"] = {{"target_faces", options.target_faces},
                            {"target_vertices", options.target_vertices},
                            {"target_ratio", options.target_ratio},
@@ -158,11 +168,14 @@ void add_decimate_command(CLI::App& app) {
       std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", s.reason.c_str());
     if (!flags->quiet) {
       std::printf(
-          "%s: %zu faces -> %llu faces, %llu vertices (%s) in %.2f s (decimate %.2f s), largest cost "
+          "%s: %zu faces -> %llu faces, %llu vertices%s (%s) in %.2f s (decimate %.2f s), largest cost "
           "%.3g, peak RSS %s\n",
           flags->input.c_str(), input_faces, static_cast<unsigned long long>(s.faces),
-          static_cast<unsigned long long>(s.vertices), stop_name(s.stop), total_seconds, decimate_seconds,
-          s.max_error, format_bytes(peak_rss_bytes()).c_str());
+          static_cast<unsigned long long>(s.vertices),
+          s.seam_vertices > 0 ? (" (+" + std::to_string(s.seam_vertices) + " copies along seams)").c_str()
+                              : "",
+          stop_name(s.stop), total_seconds, decimate_seconds, s.max_error,
+          format_bytes(peak_rss_bytes()).c_str());
     }
   });
 }

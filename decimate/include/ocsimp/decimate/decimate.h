@@ -95,9 +95,14 @@ struct DecimateOptions {
   // interpolated along each collapse at the placement's parameter on the edge.
   double attribute_weight = 0;
 
-  // Merge vertices at exactly equal positions before decimating (their quadrics add; the first vertex's
-  // attributes are kept).
-  bool weld = false;
+  // Merge vertices at exactly equal positions before decimating (their quadrics add), so that what a file
+  // stores twice - both sides of a texture seam or a hard normal edge, the corners of a triangle soup, the
+  // rims of patches meeting - moves as one and cannot crack open. Where the merged vertices carried
+  // different attributes (a seam), each output corner takes its own side's attributes at the new position,
+  // and an output vertex where the sides still differ is written once per side (DecimateStats::
+  // seam_vertices); the vertex counts and targets count positions. Off: such vertices are separate, and each
+  // copy is a border.
+  bool weld = true;
 
   // Also return each output vertex's quadric (DecimateResult::quadrics): the sum of everything its input
   // vertices carried, plus the border and fold planes this run added, so a further decimation of the result
@@ -128,6 +133,8 @@ struct DecimateStats {
   std::uint64_t target_faces = 0;     // effective face target (0: none)
   std::uint64_t target_vertices = 0;  // effective vertex target (0: none)
   std::uint64_t welded_vertices = 0;  // vertices merged into another by `weld`
+  // Vertices the output holds beyond `vertices`: copies of a position, one per side of an attribute seam.
+  std::uint64_t seam_vertices = 0;
   // Vertices only one face uses: nearly all of them in a triangle soup (each face its own three vertices,
   // as some exporters write), whose faces decimate as separate pieces (see separate_faces_note).
   std::uint64_t single_face_vertices = 0;

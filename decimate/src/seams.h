@@ -1,0 +1,42 @@
+// Attribute seams: an input that stores a vertex once per side of a texture seam or a hard normal edge
+// (vertices at one position, each with its own uv or normal) is decimated welded, so both sides of the seam
+// move together and the surface cannot crack open along it, and the sides are told apart again on output.
+//
+// The decimator only knows one attribute value per position. On output, each face corner takes the
+// attribute its own side of the seam has at the new vertex's position: a walk over the original faces,
+// starting at those around the corner's original vertex and moving to any face sharing a vertex with the
+// current one that lies nearer the position, ends at the nearest point of that side, and the attributes are
+// interpolated there. The walk crosses faces through the input's own vertices, never through the weld, so it
+// stays on its side. The corners of an output vertex whose attributes then agree share one output vertex;
+// those that differ (the two sides of a seam) get one each, at the same position.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "ocsimp/core/mesh.h"
+#include "ocsimp/core/quadric.h"
+
+namespace ocsimp::decimate_detail {
+
+// The input as it was before welding: what the output's attributes are interpolated from.
+struct SeamSource {
+  std::vector<Vec3f> positions;
+  std::vector<Triangle> triangles;
+  std::vector<Vec3f> normals;
+  std::vector<Color> colors;
+  std::vector<Vec2f> uvs;
+};
+
+// Whether vertex a and b (at one position) carry different attributes, so that welding them joins a seam.
+bool attributes_differ(const IndexedMesh& mesh, Index a, Index b);
+
+// Gives every corner of `out` its side's attributes and splits the vertices where sides differ.
+// `face_origin[f]` is the index in source.triangles of the input face output face f descends from; `out`
+// holds positions and triangles (its attribute arrays are replaced) and `quadrics`, when not null, one
+// quadric per vertex, which a split vertex shares out evenly among its copies, so that welding them again
+// (the next level of an LOD chain) adds them back up to the whole. Returns the vertices added.
+std::uint64_t restore_seams(const SeamSource& source, const std::vector<Index>& face_origin, IndexedMesh& out,
+                            std::vector<Quadric>* quadrics);
+
+}  // namespace ocsimp::decimate_detail

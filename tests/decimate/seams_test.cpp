@@ -1,0 +1,173 @@
+// Attribute seams under decimation (decimate/src/seams.h): a mesh that stores a vertex once per side of a
+// texture seam is decimated welded, so it cannot crack, and each side keeps its own texture coordinates.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "ocsimp/decimate/decimate.h"
+
+namespace ocsimp {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kMajor = 1.0, kMinor = 0.4;
+
+// A torus of n x m quads with the uv map u = angle around the axis / 2 pi, v = angle around the tube / 2 pi,
+// and its normals: a texture-mapped mesh as exporters write it, with the first row and column of vertices
+// stored twice (at u = 0 and u = 1, v = 0 and v = 1), so each seam is two borders at the same positions.
+IndexedMesh uv_torus(int n, int m) {
+  IndexedMesh mesh;
+  for (int i = 0; i <= n; ++i) {
+    for (int j = 0; j <= m; ++j) {
+      // The seam copies take the very same position: angles of the wrapped index.
+      const double a = 2 * kPi * (i % n) / n, b = 2 * kPi * (j % m) / m;
+      const double r = kMajor + kMinor * std::cos(b);
+      mesh.positions.emplace_back(static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)),
+                                  static_cast<float>(kMinor * std::sin(b)));
+      mesh.normals.emplace_back(static_cast<float>(std::cos(b) * std::cos(a)),
+                                static_cast<float>(std::cos(b) * std::sin(a)),
+                                static_cast<float>(std::sin(b)));
+      mesh.uvs.emplace_back(static_cast<float>(i) / static_cast<float>(n),
+                            static_cast<float>(j) / static_cast<float>(m));
+    }
+  }
+  auto id = [m](int i, int j) { return static_cast<Index>(i * (m + 1) + j); };
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < m; ++j) {
+      mesh.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      mesh.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  }
+  return mesh;
+}
+
+// The torus's (u, v) at a point near it, in [0, 1).
+Eigen::Vector2d torus_uv(const Vec3f& p) {
+  const double a = std::atan2(p.y(), p.x());
+  const double b = std::atan2(p.z(), std::hypot(p.x(), p.y()) - kMajor);
+  auto unit = [](double angle) { return angle / (2 * kPi) - std::floor(angle / (2 * kPi)); };
+  return {unit(a), unit(b)};
+}
+
+// Distance between two values of a periodic coordinate of period 1.
+double wrapped(double x, double y) {
+  const double d = std::abs(x - y);
+  return std::min(d, 1 - d);
+}
+
+// Border edges of the mesh once vertices at equal positions are taken as one: cracks, on a closed surface.
+std::size_t open_edges(const IndexedMesh& mesh) {
+  std::map<std::array<float, 3>, Index> ids;
+  std::vector<Index> id(mesh.vertex_count());
+  for (std::size_t v = 0; v < id.size(); ++v) {
+    const Vec3f& p = mesh.positions[v];
+    id[v] =
+        ids.emplace(std::array<float, 3>{p.x(), p.y(), p.z()}, static_cast<Index>(ids.size())).first->second;
+  }
+  std::map<std::pair<Index, Index>, int> uses;
+  for (const Triangle& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      const Index a = id[t[k]], b = id[t[(k + 1) % 3]];
+      ++uses[{std::min(a, b), std::max(a, b)}];
+    }
+  }
+  return static_cast<std::size_t>(
+      std::count_if(uses.begin(), uses.end(), [](const auto& e) { return e.second == 1; }));
+}
+
+std::size_t distinct_positions(const IndexedMesh& mesh) {
+  std::map<std::array<float, 3>, int> seen;
+  for (const Vec3f& p : mesh.positions) seen[{p.x(), p.y(), p.z()}] = 1;
+  return seen.size();
+}
+
+TEST(Seams, AUvTorusDecimatesClosedWithEachSideKeepingItsTextureCoordinates) {
+  const IndexedMesh torus = uv_torus(48, 24);
+  ASSERT_EQ(open_edges(torus), 0u);  // closed, seams and all
+  for (const std::uint64_t target : {1000u, 300u, 100u}) {
+    DecimateOptions o;
+    o.target_faces = target;
+    const DecimateResult r = decimate(QuadricMesh{torus, {}}, o);
+    const IndexedMesh& out = r.mesh;
+    ASSERT_EQ(out.face_count(), target);
+    EXPECT_EQ(open_edges(out), 0u) << target;
+    // The vertex counts are of positions; the seams add one copy of a position per extra side.
+    EXPECT_EQ(distinct_positions(out), r.stats.vertices) << target;
+    EXPECT_GT(r.stats.seam_vertices, 0u) << target;
+    EXPECT_EQ(out.vertex_count(), r.stats.vertices + r.stats.seam_vertices) << target;
+    ASSERT_EQ(out.uvs.size(), out.vertex_count());
+    ASSERT_EQ(out.normals.size(), out.vertex_count());
+    // Each corner's uv is the map's value at its vertex, on its own side of the seams: no face reaches
+    // across one (the u of its corners would span nearly 1), and each uv is within a small part of a
+    // texture from the torus's own (u, v) at the vertex, taken periodically.
+    double worst = 0, worst_normal = 0;
+    for (const Triangle& t : out.triangles) {
+      for (int axis = 0; axis < 2; ++axis) {
+        float lo = 1, hi = 0;
+        for (Index v : t) lo = std::min(lo, out.uvs[v][axis]), hi = std::max(hi, out.uvs[v][axis]);
+        EXPECT_LT(hi - lo, 0.5f) << target;
+      }
+      for (Index v : t) {
+        const Eigen::Vector2d expected = torus_uv(out.positions[v]);
+        worst =
+            std::max({worst, wrapped(out.uvs[v].x(), expected.x()), wrapped(out.uvs[v].y(), expected.y())});
+        const Vec3d p = out.positions[v].cast<double>();
+        const Vec3d centre = Vec3d(p.x(), p.y(), 0).normalized() * kMajor;
+        const Vec3d normal = (p - centre).normalized();
+        worst_normal = std::max(worst_normal, (normal - out.normals[v].cast<double>()).norm());
+      }
+    }
+    EXPECT_LT(worst, 0.01) << target;
+    EXPECT_LT(worst_normal, 0.05) << target;
+  }
+}
+
+TEST(Seams, UnweldedTheSeamsCrack) {
+  // What welding prevents: decimated without it, each side of a seam is a border of its own and the two
+  // move apart.
+  DecimateOptions o;
+  o.target_faces = 300;
+  o.weld = false;
+  const DecimateResult r = decimate(QuadricMesh{uv_torus(48, 24), {}}, o);
+  EXPECT_GT(open_edges(r.mesh), 0u);
+  EXPECT_EQ(r.stats.seam_vertices, 0u);
+}
+
+TEST(Seams, SplitVerticesShareOutTheirQuadric) {
+  // On a closed surface, without the planes that hold borders and seams in place, the output quadrics sum
+  // to the input's face quadrics; a vertex split across a seam must not count its quadric once per copy.
+  const IndexedMesh torus = uv_torus(48, 24);
+  Quadric input;
+  for (const Quadric& q : face_quadrics_per_vertex(torus)) input += q;
+  DecimateOptions o;
+  o.target_faces = 300;
+  o.boundary_weight = 0;
+  o.output_quadrics = true;
+  const DecimateResult r = decimate(QuadricMesh{torus, {}}, o);
+  ASSERT_EQ(r.quadrics.size(), r.mesh.vertex_count());
+  ASSERT_GT(r.stats.seam_vertices, 0u);
+  Quadric output;
+  for (const Quadric& q : r.quadrics) output += q;
+  const double scale = input.a00 + input.a11 + input.a22;
+  EXPECT_NEAR(output.a00 + output.a11 + output.a22, scale, 1e-9 * scale);
+  EXPECT_NEAR(output.c, input.c, 1e-9 * scale);
+}
+
+TEST(Seams, TheSameInputGivesTheSameBytesAtAnyThreadCount) {
+  const IndexedMesh torus = uv_torus(96, 48);
+  DecimateOptions o;
+  o.target_faces = 500;
+  o.threads = 1;
+  const IndexedMesh one = decimate(QuadricMesh{torus, {}}, o).mesh;
+  o.threads = 2;
+  const IndexedMesh two = decimate(QuadricMesh{torus, {}}, o).mesh;
+  EXPECT_EQ(one.triangles, two.triangles);
+  EXPECT_EQ(one.positions, two.positions);
+  EXPECT_EQ(one.uvs, two.uvs);
+  EXPECT_EQ(one.normals, two.normals);
+}
+
+}  // namespace
+}  // namespace ocsimp
