@@ -13,10 +13,12 @@
 // README's '#' heading) is refused at its first line that is no OBJ statement. A '\' at the end of a line
 // continues the statement on the next one.
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cstring>
 #include <functional>
 #include <limits>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -78,7 +80,8 @@ class ObjStream final : public TriangleStream {
         capacity_(std::max<std::size_t>(options.batch_capacity, 1)),
         progress_(options.progress),
         warn_(options.warn),
-        vertex_sink_(options.vertex_sink) {
+        vertex_sink_(options.vertex_sink),
+        split_(options.split_corner_attributes && !options.vertex_sink) {
     try {
       load_records();
     } catch (const Error&) {
@@ -114,6 +117,9 @@ class ObjStream final : public TriangleStream {
           break;
         case Keyword::f:
           parse_face(rest, line.data() + line.size());
+          if (!copies_.empty()) {
+            for (Corner& c : corners_) c.v = corner_vertex(c);
+          }
           emit_fan(batch);
           break;
         default:
@@ -428,8 +434,43 @@ class ObjStream final : public TriangleStream {
     sink_colors_buffer_.clear();
   }
 
+  // With split_: the vertex corner c stands for, the file's own or a copy of it with the corner's texture
+  // coordinate and normal. The copies are made in pass 2 (while the first corners still assign the file's
+  // vertices their attributes) and looked up in pass 3, which meets the corners in the same order and so
+  // makes the same comparisons.
+  Index corner_vertex(const Corner& c) {
+    const Index v = c.v;
+    const bool uv_differs = c.vt != kNone && !vertices_.uvs.empty() && vertices_.uvs[v] != uv_records_[c.vt];
+    const bool normal_differs =
+        c.vn != kNone && !vertices_.normals.empty() && vertices_.normals[v] != normal_records_[c.vn];
+    if (!uv_differs && !normal_differs) return v;
+    const Vec2f uv = uv_differs ? uv_records_[c.vt] : Vec2f::Zero();
+    const Vec3f normal = normal_differs ? normal_records_[c.vn] : Vec3f::Zero();
+    CopyKey key{v, uv_differs, normal_differs, {uv.x(), uv.y()}, {normal.x(), normal.y(), normal.z()}};
+    if (vertices_.positions.size() >= kNone)
+      fail("too many vertices once texture seams and hard edges are split");
+    const auto [at, added] = copies_.emplace(key, static_cast<Index>(vertices_.positions.size()));
+    if (added) {
+      vertices_.positions.push_back(vertices_.positions[v]);
+      if (!vertices_.colors.empty()) vertices_.colors.push_back(vertices_.colors[v]);
+      // An attribute the corner agrees on is the file vertex's, which a later corner may still assign: the
+      // copies take it after pass 2 (see copy_agreed_attributes).
+      if (!vertices_.uvs.empty()) vertices_.uvs.push_back(uv);
+      if (!vertices_.normals.empty()) vertices_.normals.push_back(normal);
+    }
+    return at->second;
+  }
+
+  void copy_agreed_attributes() {
+    for (const auto& [key, copy] : copies_) {
+      if (!key.uv_differs && !vertices_.uvs.empty()) vertices_.uvs[copy] = vertices_.uvs[key.v];
+      if (!key.normal_differs && !vertices_.normals.empty())
+        vertices_.normals[copy] = vertices_.normals[key.v];
+    }
+  }
+
   // Pass 2 (with attributes only): the first corner that references a position gives it its vt and vn;
-  // those whose later corners disagree are counted for ReadOptions::warn.
+  // those whose later corners disagree are counted for ReadOptions::warn, or with split_ get copies.
   void assign_attributes() {
     const std::size_t n = vertices_.positions.size();
     std::vector<std::uint8_t> has_uv(uv_records_.empty() ? 0 : n, 0),
@@ -463,6 +504,7 @@ class ObjStream final : public TriangleStream {
             } else if (!has_normal.empty() && has_normal[c.v] == 0) {
               has_normal[c.v] = kCornerWithout;
             }
+            if (split_) corner_vertex(c);
           }
           break;
         default:
@@ -470,9 +512,13 @@ class ObjStream final : public TriangleStream {
       }
       report_progress();
     }
-    uv_records_ = {};
-    normal_records_ = {};
-    if (warn_ && uv_seams + hard_edges > 0) warn_(merged_corners_note(uv_seams, hard_edges));
+    if (copies_.empty()) {
+      uv_records_ = {};
+      normal_records_ = {};
+    } else {
+      copy_agreed_attributes();  // pass 3 still compares corners with the records
+    }
+    if (warn_ && !split_ && uv_seams + hard_edges > 0) warn_(merged_corners_note(uv_seams, hard_edges));
     // A file where only some faces give vt or vn: the vertices only those without reference get made-up
     // values, which simplification then blends into the real ones.
     auto without = [](const std::vector<std::uint8_t>& state, bool kept) {
@@ -535,6 +581,17 @@ class ObjStream final : public TriangleStream {
   std::uint64_t statement_offset_ = 0;
   std::string joined_;
   std::vector<Corner> corners_;
+  // split_: the copies of file vertices, by vertex and the attributes they differ in (values, not record
+  // indices: two vt records of one value are one side of a seam).
+  struct CopyKey {
+    Index v;
+    bool uv_differs, normal_differs;
+    std::array<float, 2> uv;
+    std::array<float, 3> normal;
+    auto operator<=>(const CopyKey&) const = default;
+  };
+  bool split_ = false;
+  std::map<CopyKey, Index> copies_;
   std::vector<Triangle> pending_;  // the rest of a polygon's fan that did not fit the last batch
   std::size_t pending_next_ = 0;
 

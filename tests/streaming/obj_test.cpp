@@ -19,6 +19,30 @@ IndexedMesh read_text(const TempDir& dir, const std::string& text, const std::st
   return read_mesh(dir / name);
 }
 
+// A plain reading of an OBJ of "f v/vt v/vt v/vt" triangles (as spot's): its vt records, and each face
+// corner's (v, vt), 0-based.
+std::pair<std::vector<Vec2f>, std::vector<std::pair<int, int>>> corner_uvs(const std::string& path) {
+  std::istringstream in(test::read_file_bytes(path));
+  std::vector<Vec2f> vt;
+  std::vector<std::pair<int, int>> corners;
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream words(line);
+    std::string keyword;
+    words >> keyword;
+    if (keyword == "vt") {
+      float u, v;
+      words >> u >> v;
+      vt.emplace_back(u, v);
+    } else if (keyword == "f") {
+      for (std::string corner; words >> corner;) {
+        const auto slash = corner.find('/');
+        corners.emplace_back(std::stoi(corner.substr(0, slash)) - 1, std::stoi(corner.substr(slash + 1)) - 1);
+      }
+    }
+  }
+  return {vt, corners};
+}
+
 // Reading `text` must fail with one error at line `line` whose reason contains `reason`.
 void expect_error_at_line(const TempDir& dir, const std::string& text, std::uint64_t line,
                           const std::string& reason) {
@@ -93,6 +117,13 @@ TEST(Obj, FirstCornerWinsOnSeams) {
   EXPECT_EQ(m.uvs, (std::vector<Vec2f>{{0, 0}, {1, 0}, {0, 1}}));
 }
 
+// Four vertices whose corners disagree: vertex 1 on three uvs (two of them equal) and two normals, vertices
+// 2 and 3 on two uvs each; vertex 4 agrees.
+constexpr const char* kSeamsObj =
+    "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.5\nvt 0 0\n"
+    "vt 1 1\nvn 0 0 1\nvn 0 1 0\n"
+    "f 1/1/1 2/2/1 3/3/1\nf 1/4/2 3/4/1 2/4/1\nf 2/2/1 4/6/1 3/3/1\nf 1/5/2 2/2/1 4/6/1\n";
+
 // The vertices whose corners disagree are counted once each, by value (two vt records of the same value do
 // not make a seam), and told through ReadOptions::warn in one message; a file whose corners agree says
 // nothing.
@@ -101,11 +132,7 @@ TEST(Obj, SaysHowManyVerticesItsCornersDisagreeOn) {
   std::vector<std::string> told;
   ReadOptions options;
   options.warn = [&](const std::string& message) { told.push_back(message); };
-  test::write_file_bytes(
-      dir / "seams.obj",
-      "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.5\nvt 0 0\n"
-      "vt 1 1\nvn 0 0 1\nvn 0 1 0\n"
-      "f 1/1/1 2/2/1 3/3/1\nf 1/4/2 3/4/1 2/4/1\nf 2/2/1 4/6/1 3/3/1\nf 1/5/2 2/2/1 4/6/1\n");
+  test::write_file_bytes(dir / "seams.obj", kSeamsObj);
   const IndexedMesh m = read_mesh(dir / "seams.obj", options);
   EXPECT_EQ(m.uvs, (std::vector<Vec2f>{{0, 0}, {1, 0}, {0, 1}, {1, 1}}));
   EXPECT_EQ(m.normals[0], Vec3f(0, 0, 1));
@@ -358,25 +385,8 @@ TEST(ObjShared, SpotTakesEachPositionsUvFromItsFirstCorner) {
   EXPECT_EQ(m.face_count(), 5856u);
   ASSERT_TRUE(m.has_uvs());
   EXPECT_FALSE(m.has_normals());
-  // The same rule by a plain independent reading: spot's faces are "f v/vt v/vt v/vt" triangles.
-  std::istringstream in(test::read_file_bytes(path));
-  std::vector<Vec2f> vt;
-  std::vector<std::pair<int, int>> corners;
-  for (std::string line; std::getline(in, line);) {
-    std::istringstream words(line);
-    std::string keyword;
-    words >> keyword;
-    if (keyword == "vt") {
-      float u, v;
-      words >> u >> v;
-      vt.emplace_back(u, v);
-    } else if (keyword == "f") {
-      for (std::string corner; words >> corner;) {
-        const auto slash = corner.find('/');
-        corners.emplace_back(std::stoi(corner.substr(0, slash)) - 1, std::stoi(corner.substr(slash + 1)) - 1);
-      }
-    }
-  }
+  // The same rule by a plain independent reading.
+  const auto [vt, corners] = corner_uvs(path);
   std::vector<bool> seen(m.vertex_count(), false), seam(m.vertex_count(), false);
   std::size_t checked = 0, seams = 0;
   for (auto [v, t] : corners) {
@@ -402,6 +412,60 @@ TEST(ObjShared, SpotTakesEachPositionsUvFromItsFirstCorner) {
   const MeshTopology topology = analyze_topology(m);
   EXPECT_EQ(topology.boundary_edges, 0u);  // uv seams split attributes, never positions
   EXPECT_EQ(topology.unreferenced_vertices, 0u);
+}
+
+// With ReadOptions::split_corner_attributes, a vertex whose corners disagree becomes one vertex per
+// distinct texture coordinate and normal, at the same position: every corner then reads exactly what the
+// file gives it, and nothing is said.
+TEST(Obj, SplitsCornersThatDisagreeOnRequest) {
+  TempDir dir;
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  options.split_corner_attributes = true;
+  test::write_file_bytes(dir / "seams.obj", kSeamsObj);
+  const IndexedMesh m = read_mesh(dir / "seams.obj", options);
+  EXPECT_TRUE(told.empty()) << told[0];
+  const std::vector<Vec2f> vt = {{0, 0}, {1, 0}, {0, 1}, {0.5, 0.5}, {0, 0}, {1, 1}};
+  const std::vector<Vec3f> vn = {{0, 0, 1}, {0, 1, 0}};
+  const std::vector<Vec3f> v = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  // Corners as the file gives them: (v, vt, vn), 0-based.
+  const int corners[4][3][3] = {{{0, 0, 0}, {1, 1, 0}, {2, 2, 0}},
+                                {{0, 3, 1}, {2, 3, 0}, {1, 3, 0}},
+                                {{1, 1, 0}, {3, 5, 0}, {2, 2, 0}},
+                                {{0, 4, 1}, {1, 1, 0}, {3, 5, 0}}};
+  ASSERT_EQ(m.face_count(), 4u);
+  for (int f = 0; f < 4; ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const Index at = m.triangles[f][k];
+      EXPECT_EQ(m.positions[at], v[corners[f][k][0]]) << f << " " << k;
+      EXPECT_EQ(m.uvs[at], vt[corners[f][k][1]]) << f << " " << k;
+      EXPECT_EQ(m.normals[at], vn[corners[f][k][2]]) << f << " " << k;
+    }
+  }
+  // The file's 4 vertices, then one copy per distinct disagreeing (uv, normal): vertex 1 at uv (0.5, 0.5)
+  // with normal (0, 1, 0), vertex 1 at its own uv (0, 0) with normal (0, 1, 0), vertex 2 at (0.5, 0.5) and
+  // vertex 3 at (0.5, 0.5).
+  EXPECT_EQ(m.vertex_count(), 8u);
+}
+
+// spot's uv seams, split: every corner reads its own vt, and the copies sit exactly on their vertex, so
+// the surface is as closed as before once positions are taken as one.
+TEST(ObjShared, SpotSplitGivesEveryCornerItsOwnUv) {
+  OCSIMP_REQUIRE_SHARED_MESH(path, "spot.obj");
+  ReadOptions options;
+  options.split_corner_attributes = true;
+  const IndexedMesh m = read_mesh(path, options);
+  const IndexedMesh merged = read_mesh(path);
+  ASSERT_EQ(m.face_count(), merged.face_count());
+  EXPECT_GT(m.vertex_count(), merged.vertex_count());
+  const auto [vt, corners] = corner_uvs(path);
+  ASSERT_EQ(corners.size(), 3 * m.face_count());
+  for (std::size_t c = 0; c < corners.size(); ++c) {
+    const Index at = m.triangles[c / 3][c % 3];
+    ASSERT_EQ(m.uvs[at], vt[corners[c].second]) << "corner " << c;
+    ASSERT_EQ(m.positions[at], merged.positions[merged.triangles[c / 3][c % 3]]) << "corner " << c;
+  }
 }
 
 TEST(ObjShared, OtherModels) {

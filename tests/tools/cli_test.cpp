@@ -998,18 +998,28 @@ TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
   std::ofstream(obj)
       << ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.5 0.5\n"
           "f 1/1 2/2 3/3\nf 1/5 3/3 4/4\n");
+  const std::string smears =
+      "ocsimp: warning: " + obj +
+      ": 1 vertex on texture seams (face corners giving different texture coordinates) "
+      "keeps its first corner's, so the texture smears along those seams\n";
+  const std::vector<std::string> decimating = {"decimate -q " + obj + " -o " + (dir / "d.ply") + " --faces 1",
+                                               "simplify -q " + obj + " -o " + (dir / "s.ply") + " --faces 1",
+                                               "lod -q " + obj + " -o " + (dir / "l.ply") + " --faces 1"};
   for (const std::string& command : {"info " + obj, "convert -q " + obj + " " + (dir / "c.ply"),
-                                     "decimate -q " + obj + " -o " + (dir / "d.ply") + " --faces 1",
-                                     "cluster -q " + obj + " -o " + (dir / "k.ply") + " --grid 4",
-                                     "simplify -q " + obj + " -o " + (dir / "s.ply") + " --faces 1",
-                                     "lod -q " + obj + " -o " + (dir / "l.ply") + " --faces 1"}) {
+                                     "cluster -q " + obj + " -o " + (dir / "k.ply") + " --grid 4"}) {
     const CommandResult r = run(command, dir);
     EXPECT_EQ(r.exit_code, 0) << command << ": " << r.err;
-    EXPECT_EQ(r.err,
-              "ocsimp: warning: " + obj +
-                  ": 1 vertex on texture seams (face corners giving different texture coordinates) keeps its "
-                  "first corner's, so the texture smears along those seams\n")
-        << command;
+    EXPECT_EQ(r.err, smears) << command;
+  }
+  // The commands that decimate read each side of the seam as its own vertex and weld them back, keeping
+  // both sides' texture coordinates: nothing smears, unless welding is off.
+  for (const std::string& command : decimating) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 0) << command << ": " << r.err;
+    EXPECT_EQ(r.err, "") << command;
+    const CommandResult unwelded = run(command + " --no-weld", dir);
+    EXPECT_EQ(unwelded.exit_code, 0) << command << ": " << unwelded.err;
+    EXPECT_EQ(unwelded.err, smears) << command;
   }
 }
 

@@ -99,6 +99,8 @@ void add_decimate_command(CLI::App& app) {
     ReadOptions read;
     read.progress = progress;
     read.warn = console.warn;
+    // The decimator welds the sides of a seam back together and keeps each one's attributes.
+    read.split_corner_attributes = options.weld;
     QuadricMesh input;
     input.mesh = read_mesh(flags->input, read);
     const double read_seconds = seconds_since(start);

@@ -162,6 +162,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   read.progress = options.progress;
   read.warn = options.warn;
   read.memory_budget = vertex_allowance(input_path, options, budget);
+  // The decimator welds the sides of a seam back together and keeps each one's attributes.
+  read.split_corner_attributes = options.decimate.weld;
   std::unique_ptr<TriangleStream> stream = open_triangle_stream(input_path, read);
   const double fine_per_vertex = options.cluster.fine_cells_per_target;
   stage.out_of_core = dereferenced_out_of_core(*stream);
@@ -468,6 +470,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   first.two_stage = options.two_stage;
   first.intermediate = options.intermediate;
   first.cluster = options.cluster;
+  first.decimate.weld = options.decimate.weld;  // the first stage reads seams split only for a welding run
   first.warn = options.warn;
   first.threads = options.threads;
   first.progress = options.progress;
