@@ -29,7 +29,9 @@
 #include <cstring>
 #include <functional>
 #include <limits>
+#include <map>
 #include <optional>
+#include <tuple>
 
 #include "byte_reader.h"
 #include "formats.h"
@@ -442,6 +444,10 @@ class PlyStream final : public TriangleStream {
   bool fast_faces_ = false;   // the face record is just the index list
   std::uint64_t face_offset_ = 0, face_line_ = 0, face_bytes_ = 0;
   std::optional<std::size_t> wedge_property_;  // the face element's per-corner "texcoord" list
+  // ReadOptions::split_corner_attributes: the corners whose texcoord disagrees with their vertex's first,
+  // by (face record, corner), and the copy of the vertex each reads instead.
+  bool split_ = false;
+  std::map<std::pair<std::uint64_t, std::uint64_t>, Index> corner_copies_;
   std::uint64_t triangles_hint_ = 0;
   std::uint64_t bytes_total_ = 0;
 
@@ -481,6 +487,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
       warn_(options.warn),
       vertex_sink_(options.vertex_sink),
       capacity_(std::max<std::size_t>(options.batch_capacity, 1)) {
+  split_ = options.split_corner_attributes && !options.vertex_sink;
   header_ = parse_ply_header(reader_);
   ascii_ = header_.encoding == PlyEncoding::ascii;
   swap_ = !ascii_ &&
@@ -1221,6 +1228,10 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
     return;
   }
   check_corner(index, offset);
+  if (!corner_copies_.empty()) {
+    if (const auto copy = corner_copies_.find({current_record_, corners_seen_}); copy != corner_copies_.end())
+      index = copy->second;
+  }
   if (strips_) {
     if (corners_seen_ >= 2) {
       // Every other triangle of a strip is wound the other way; skip the degenerate ones that join strips.
@@ -1302,6 +1313,7 @@ void PlyStream::load_wedge_uvs() {
   // One face's lists; they grow with the values actually read, never with a count the file claims.
   std::vector<std::int64_t> corners;
   std::vector<float> uv;
+  std::map<std::tuple<std::size_t, float, float>, Index> copies;  // split_: (vertex, texcoord) -> its copy
   while (current_record_ < element.count) {
     begin_record();
     corners.clear();
@@ -1338,13 +1350,28 @@ void PlyStream::load_wedge_uvs() {
       fail_at_byte(uv_offset, reason);
     }
     for (std::size_t k = 0; k < corners.size() && !uv.empty(); ++k) {
-      take_first_corner(given, vertices_.uvs, static_cast<std::size_t>(corners[k]),
-                        Vec2f(uv[2 * k], uv[2 * k + 1]), seams);
+      const auto v = static_cast<std::size_t>(corners[k]);
+      const Vec2f value(uv[2 * k], uv[2 * k + 1]);
+      take_first_corner(given, vertices_.uvs, v, value, seams);
+      if (split_ && !strips_ && vertices_.uvs[v] != value) {
+        // One copy per vertex and distinct texcoord, at the vertex's position with its other attributes.
+        if (vertices_.positions.size() >= std::numeric_limits<Index>::max())
+          fail("too many vertices once texture seams are split, in " + where());
+        const auto [at, added] = copies.emplace(std::tuple(v, value.x(), value.y()),
+                                                static_cast<Index>(vertices_.positions.size()));
+        if (added) {
+          vertices_.positions.push_back(vertices_.positions[v]);
+          if (!vertices_.normals.empty()) vertices_.normals.push_back(vertices_.normals[v]);
+          if (!vertices_.colors.empty()) vertices_.colors.push_back(vertices_.colors[v]);
+          vertices_.uvs.push_back(value);
+        }
+        corner_copies_.emplace(std::pair(current_record_, std::uint64_t{k}), at->second);
+      }
     }
     end_record();
     if ((current_record_ & 0xfff) == 0) report_progress();
   }
-  if (warn_ && seams > 0) warn_(merged_corners_note(seams, 0));
+  if (warn_ && !split_ && seams > 0) warn_(merged_corners_note(seams, 0));
 }
 
 // Records of a count followed by the indices, nothing else, while the count is 3.

@@ -933,6 +933,25 @@ TEST(PlyLayout, PerCornerTextureCoordinatesGoToTheirVertices) {
         sink.vertex_sink = [](const VertexChunk&) {};
         EXPECT_EQ(open_triangle_stream(path, sink)->attributes_left_out(), "texture coordinates");
         EXPECT_EQ(open_triangle_stream(path)->attributes_left_out(), "");
+        // With split_corner_attributes every corner reads its own texcoord: vertices 0 and 2 get a copy
+        // each for the second triangle, and nothing is said. In batches of one triangle, the same.
+        told.clear();
+        options.split_corner_attributes = true;
+        for (const std::size_t capacity : {std::size_t{1}, TriangleBatch::default_capacity}) {
+          options.batch_capacity = capacity;
+          const IndexedMesh split = read_mesh(path, options);
+          EXPECT_TRUE(told.empty());
+          ASSERT_EQ(split.vertex_count(), 7u);
+          ASSERT_EQ(split.face_count(), 2u);
+          for (int f = 0; f < 2; ++f) {
+            for (int k = 0; k < 3; ++k) {
+              const Index at = split.triangles[f][k];
+              EXPECT_EQ(split.uvs[at], Vec2f(uv[f][2 * k], uv[f][2 * k + 1])) << f << " " << k;
+              const float* p = xyz[faces[f][k]];
+              EXPECT_EQ(split.positions[at], Vec3f(p[0], p[1], p[2])) << f << " " << k;
+            }
+          }
+        }
       }
     }
   }

@@ -52,9 +52,9 @@ struct ReadOptions {
   // face corners give them different texture coordinates or normals (uv seams, hard edges) keep their first
   // corner's, as a mesh here holds one of each per vertex.
   std::function<void(const std::string& message)> warn;
-  // OBJ: a vertex whose face corners give it different texture coordinates or normals (a uv seam, a hard
-  // edge) becomes one vertex per distinct pair, at the same position, instead of keeping its first corner's
-  // (and no warning is due). For the commands that decimate, which weld such copies back for the collapses
+  // A vertex whose face corners give it different texture coordinates or normals (an OBJ's vt and vn, a PLY
+  // face's texcoord list: a uv seam, a hard edge) becomes one vertex per distinct value, at the same
+  // position, instead of keeping its first corner's (and no warning is due). For the commands that decimate, which weld such copies back for the collapses
   // and keep each side's attributes (DecimateOptions::weld). Off by default: a vertex of the file stays one
   // vertex (what `info` counts). Ignored out of core, where the corners' attributes are not read.
   bool split_corner_attributes = false;
