@@ -131,6 +131,10 @@ std::uint64_t parse_byte_size(std::string_view text) {
     scale = 1024.0 * 1024 * 1024;
   else if (unit == "T" || unit == "TB" || unit == "TIB")
     scale = 1024.0 * 1024 * 1024 * 1024;
+  else if (unit == "P" || unit == "PB" || unit == "PIB")  // the same size in K was accepted
+    scale = 1024.0 * 1024 * 1024 * 1024 * 1024;
+  else if (unit == "E" || unit == "EB" || unit == "EIB")
+    scale = 1024.0 * 1024 * 1024 * 1024 * 1024 * 1024;
   if (scale == 0 || !(value >= 0) || !std::isfinite(value) || value * scale > 1.8e19) {
     throw Error("not a size: '" + s + "' (expected e.g. 2G, 512M, 100000)");
   }

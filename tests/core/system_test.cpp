@@ -13,6 +13,11 @@ TEST(System, ParsesByteSizes) {
   EXPECT_EQ(parse_byte_size("512m"), 512ull << 20);
   EXPECT_EQ(parse_byte_size("1.5GiB"), 3ull << 29);
   EXPECT_EQ(parse_byte_size("100000"), 100000ull);
+  // Every size up to the largest 64 bits hold has a unit: 1P was refused where 1099511627776K was taken.
+  EXPECT_EQ(parse_byte_size("1P"), 1ull << 50);
+  EXPECT_EQ(parse_byte_size("1099511627776K"), 1ull << 50);
+  EXPECT_EQ(parse_byte_size("8EiB"), 8ull << 60);
+  EXPECT_THROW(parse_byte_size("16E"), Error);  // past 64 bits
   EXPECT_THROW(parse_byte_size("lots"), Error);
   EXPECT_THROW(parse_byte_size("2X"), Error);
   EXPECT_THROW(parse_byte_size("-1G"), Error);
