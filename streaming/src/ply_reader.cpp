@@ -26,6 +26,7 @@
 #include <bit>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <functional>
 #include <limits>
@@ -928,8 +929,18 @@ void PlyStream::add_vertex(std::size_t index, const VertexValues& values, std::u
     if (ascii_) fail(reason);
     fail_at_byte(offset, reason);
   };
-  if (!read.allFinite() || read.cwiseAbs().maxCoeff() > std::numeric_limits<float>::max())
-    refuse("a coordinate");
+  if (!read.allFinite()) refuse("a coordinate");
+  if (Eigen::Index axis = 0; read.cwiseAbs().maxCoeff(&axis) > std::numeric_limits<float>::max()) {
+    // A double property: finite, but no float holds it.
+    char value[32];
+    std::snprintf(value, sizeof value, "%g", read[axis]);
+    const std::string reason = "vertex " + std::to_string(index) +
+                               " has a coordinate beyond the float range (+-3.4e38), which positions are "
+                               "held in: " +
+                               value;
+    if (ascii_) fail(reason);
+    fail_at_byte(offset, reason);
+  }
   // Attributes too, as the OBJ and Draco readers refuse them: a NaN normal made every attribute-weighted
   // collapse cost NaN, and the decimation order arbitrary.
   if (vertex_plan_.normals && !(std::isfinite(values.normal[0]) && std::isfinite(values.normal[1]) &&
