@@ -59,7 +59,12 @@ IndexedMesh triangle_soup(const IndexedMesh& mesh) {
   IndexedMesh soup;
   for (const Triangle& t : mesh.triangles) {
     const Index first = static_cast<Index>(soup.positions.size());
-    for (Index v : t) soup.positions.push_back(mesh.positions[v]);
+    for (Index v : t) {
+      soup.positions.push_back(mesh.positions[v]);
+      if (!mesh.normals.empty()) soup.normals.push_back(mesh.normals[v]);
+      if (!mesh.colors.empty()) soup.colors.push_back(mesh.colors[v]);
+      if (!mesh.uvs.empty()) soup.uvs.push_back(mesh.uvs[v]);
+    }
     soup.triangles.push_back({first, first + 1, first + 2});
   }
   return soup;

@@ -66,7 +66,8 @@ IndexedMesh cube(int n);
 // A long thin flat strip [0, 100] x [0, 0.1] in the z = 0 plane, facing +z: 400 x 2 cells of 0.25 x 0.05,
 // each split in two (1,600 faces). Every collapse along it leaves a sliver; one cube cell spans its width.
 IndexedMesh thin_strip();
-// The same faces with every one its own three vertices, as some exporters write a mesh.
+// The same faces with every one its own three vertices (and their attributes), as some exporters write a
+// mesh.
 IndexedMesh triangle_soup(const IndexedMesh& mesh);
 
 }  // namespace ocsimp::test

@@ -493,13 +493,16 @@ struct Decimator {
     const std::vector<Index> target = equal_position_targets(m.positions);
     for (std::size_t v = 0; v < n; ++v) stats.welded_vertices += target[v] != v;
     if (stats.welded_vertices == 0) return;
-    for (std::size_t v = 0; v < n && !storage.seams; ++v) {
-      storage.seams =
-          target[v] != v && decimate_detail::attributes_differ(m, target[v], static_cast<Index>(v));
-    }
+    // A seam: copies of a position that differ in attributes (a vertex that is not its position's lowest
+    // index and not a copy of an earlier one).
+    const std::vector<Index> side = decimate_detail::same_attribute_targets(m, target);
+    for (std::size_t v = 0; v < n && !storage.seams; ++v) storage.seams = target[v] != v && side[v] == v;
     if (storage.seams) {
       // The positions and attributes join the source in build(), once the decimator has what it needs.
       storage.seam_source.triangles = m.triangles;
+      for (Triangle& t : storage.seam_source.triangles) {
+        for (Index& v : t) v = side[v];
+      }
       storage.face_origin.reserve(m.triangles.size());
       storage.welded_at.assign(n, 0);
       for (std::size_t v = 0; v < n; ++v) storage.welded_at[target[v]] |= target[v] != v;
@@ -2680,7 +2683,7 @@ struct Decimator {
       if (storage.seams) origin_of.push_back(storage.face_origin[f]);
     }
     if (storage.seams)
-      stats.seam_vertices = decimate_detail::restore_seams(storage.seam_source, origin_of, out, quadrics);
+      stats.seam_copies = decimate_detail::restore_seams(storage.seam_source, origin_of, out, quadrics);
     return out;
   }
 };

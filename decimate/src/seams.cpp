@@ -18,28 +18,20 @@ constexpr Index kNone = std::numeric_limits<Index>::max();
 // whose walks take a few steps (the collapsed region's radius in faces).
 constexpr int kMaxSteps = 256;
 
-// Two corners of one output vertex are on the same side when their attributes agree to this much: the
-// differences left are the rounding of interpolating one point from either of two faces that share it.
-constexpr float kSameNormal = 1e-4f;  // unit normals, per coordinate
-constexpr float kSameUv = 1e-5f;      // relative to the larger of 1 and the coordinate
-constexpr int kSameColor = 1;         // per 8-bit channel: the two values may round apart
+// Two corners of one output vertex are on the same side when their walks ended in the same chart (a
+// connected piece of the input, cut at its seams) and their attributes agree to this much. Within a chart
+// the attributes are continuous, so corners of one side differ only where walks from different starts
+// stopped at different points of a plateau (P nearly equidistant from a band of slivers); what still
+// differs beyond this is a chart meeting itself across a seam (a cylinder's u = 0 and u = 1).
+constexpr float kSideUv = 0.05f;     // of the chart's uv extent on that axis
+constexpr float kSideNormal = 0.2f;  // unit normals, Euclidean (about 11.5 degrees)
+constexpr int kSideColor = 8;        // per 8-bit channel
 
 struct Nearest {
   Index face = kNone;
   double d2 = std::numeric_limits<double>::infinity();
-  double tie = std::numeric_limits<double>::infinity();  // see nearer()
-  std::array<double, 3> w{1, 0, 0};                      // barycentric weights of the nearest point
+  std::array<double, 3> w{1, 0, 0};  // barycentric weights of the nearest point
 };
-
-// Whether n is nearer than best. Faces around a vertex that is the nearest point of them all (p above the
-// pole of a uv sphere, off the tip of a cone) are equally near, and a walk among them would stop at the
-// first: such ties, up to rounding, go to the face whose centroid is nearer, which leads the walk on to the
-// face that actually lies under p.
-bool nearer(const Nearest& n, const Nearest& best, double size2) {
-  const double slack = 1e-9 * (best.d2 + size2);
-  if (n.d2 < best.d2 - slack) return true;
-  return n.d2 <= best.d2 + slack && n.tie < best.tie;
-}
 
 // The nearest point to p of segment (a, b): its parameter from a.
 double segment_parameter(const Vec3d& p, const Vec3d& a, const Vec3d& b) {
@@ -85,14 +77,23 @@ struct FaceLists {
   std::vector<std::size_t> begin;
   std::vector<Index> faces;
 
+  // Faces without area are left out: the walk could only cross a seam through them (a face on both sides'
+  // copies of one position, which welding drops), and they carry no attribute between their corners.
   explicit FaceLists(const SeamSource& s) : begin(s.positions.size() + 1, 0) {
-    for (const Triangle& t : s.triangles) {
+    std::vector<std::uint8_t> has_area(s.triangles.size());
+    for (std::size_t f = 0; f < s.triangles.size(); ++f) {
+      const Triangle& t = s.triangles[f];
+      const Vec3d p0 = s.positions[t[0]].cast<double>();
+      const Vec3d n = (s.positions[t[1]].cast<double>() - p0).cross(s.positions[t[2]].cast<double>() - p0);
+      has_area[f] = n.squaredNorm() > 0;
+      if (!has_area[f]) continue;
       for (Index v : t) ++begin[v + 1];
     }
     for (std::size_t v = 0; v < s.positions.size(); ++v) begin[v + 1] += begin[v];
     faces.resize(begin.back());
     std::vector<std::size_t> at(begin.begin(), begin.end() - 1);
     for (std::size_t f = 0; f < s.triangles.size(); ++f) {
+      if (!has_area[f]) continue;
       for (Index v : s.triangles[f]) faces[at[v]++] = static_cast<Index>(f);
     }
   }
@@ -102,13 +103,42 @@ struct Attributes {
   Vec3f normal = Vec3f::Zero();
   Vec2f uv = Vec2f::Zero();
   Color color{0, 0, 0, 0};
+  Index chart = kNone;                                  // of the walk's end (see Charts)
+  double d2 = std::numeric_limits<double>::infinity();  // squared distance from the position to it
+};
+
+// Connected pieces of the input through its own (unwelded) vertices and faces with area: a chart of a
+// texture atlas, a face of a cube with its own normals. Numbered by their lowest vertex.
+struct Charts {
+  std::vector<Index> parent;
+
+  Charts(const SeamSource& s, const FaceLists& lists) : parent(s.positions.size()) {
+    for (std::size_t v = 0; v < parent.size(); ++v) parent[v] = static_cast<Index>(v);
+    for (std::size_t v = 0; v < parent.size(); ++v) {
+      for (std::size_t i = lists.begin[v]; i < lists.begin[v + 1]; ++i) {
+        for (Index w : s.triangles[lists.faces[i]]) join(static_cast<Index>(v), w);
+      }
+    }
+    for (std::size_t v = 0; v < parent.size(); ++v) parent[v] = find(static_cast<Index>(v));
+  }
+  Index find(Index v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  }
+  void join(Index a, Index b) {
+    a = find(a), b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+  Index of(Index v) const { return parent[v]; }  // once built
 };
 
 class Walker {
  public:
-  Walker(const SeamSource& s, const FaceLists& lists) : s_(s), lists_(lists) {}
+  Walker(const SeamSource& s, const FaceLists& lists, const Charts& charts)
+      : s_(s), lists_(lists), charts_(charts) {}
 
-  // The attributes of the side of original vertex `start` at position p.
+  // The attributes of the side of original vertex `start` at position p (its own where no face with area
+  // uses it).
   Attributes at(Index start, const Vec3d& p) const {
     Nearest best;
     visit_fan(start, p, best);
@@ -117,7 +147,10 @@ class Walker {
       for (Index v : s_.triangles[current]) visit_fan(v, p, best);
       if (best.face == current) break;
     }
-    return interpolate(best);
+    Attributes a = best.face == kNone ? vertex_attributes(start) : interpolate(best);
+    a.chart = charts_.of(start);
+    a.d2 = best.d2;
+    return a;
   }
 
  private:
@@ -126,11 +159,10 @@ class Walker {
       const Index f = lists_.faces[i];
       if (f == best.face) continue;
       const Triangle& t = s_.triangles[f];
-      const Vec3d a = position(t[0]), b = position(t[1]), c = position(t[2]);
-      Nearest n = nearest_point(p, a, b, c);
-      n.tie = ((a + b + c) / 3 - p).squaredNorm();
-      const double size2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
-      if (nearer(n, best, size2)) {
+      Nearest n = nearest_point(p, position(t[0]), position(t[1]), position(t[2]));
+      // Strictly nearer only: around a vertex that is the nearest point of several faces (the pole of a uv
+      // sphere, whose copies each carry their own u) the walk stays on the side it started from.
+      if (n.d2 < best.d2) {
         n.face = f;
         best = n;
       }
@@ -138,6 +170,14 @@ class Walker {
   }
 
   Vec3d position(Index v) const { return s_.positions[v].cast<double>(); }
+
+  Attributes vertex_attributes(Index v) const {
+    Attributes out;
+    if (!s_.normals.empty()) out.normal = s_.normals[v];
+    if (!s_.uvs.empty()) out.uv = s_.uvs[v];
+    if (!s_.colors.empty()) out.color = s_.colors[v];
+    return out;
+  }
 
   Attributes interpolate(const Nearest& at) const {
     Attributes out;
@@ -169,19 +209,36 @@ class Walker {
   using Vec2d = Eigen::Vector2d;
   const SeamSource& s_;
   const FaceLists& lists_;
+  const Charts& charts_;
 };
 
-bool same_side(const Attributes& a, const Attributes& b, const SeamSource& s) {
-  if (!s.normals.empty() && (a.normal - b.normal).cwiseAbs().maxCoeff() > kSameNormal) return false;
+// Each chart's uv extent per axis (zero for a chart of one vertex).
+std::vector<Vec2f> chart_uv_extents(const SeamSource& s, const Charts& charts) {
+  std::vector<Vec2f> lo(s.uvs.empty() ? 0 : s.positions.size(),
+                        Vec2f::Constant(std::numeric_limits<float>::max()));
+  std::vector<Vec2f> hi(lo.size(), Vec2f::Constant(std::numeric_limits<float>::lowest()));
+  for (std::size_t v = 0; v < lo.size(); ++v) {
+    const Index c = charts.of(static_cast<Index>(v));
+    lo[c] = lo[c].cwiseMin(s.uvs[v]);
+    hi[c] = hi[c].cwiseMax(s.uvs[v]);
+  }
+  for (std::size_t v = 0; v < lo.size(); ++v)
+    lo[v] = charts.of(static_cast<Index>(v)) == v ? Vec2f(hi[v] - lo[v]) : Vec2f::Zero();
+  return lo;
+}
+
+bool same_side(const Attributes& a, const Attributes& b, const SeamSource& s,
+               const std::vector<Vec2f>& uv_extent) {
+  if (a.chart != b.chart) return false;
+  if (!s.normals.empty() && (a.normal - b.normal).norm() > kSideNormal) return false;
   if (!s.uvs.empty()) {
     for (int i = 0; i < 2; ++i) {
-      const float scale = std::max({1.0f, std::abs(a.uv[i]), std::abs(b.uv[i])});
-      if (std::abs(a.uv[i] - b.uv[i]) > kSameUv * scale) return false;
+      if (std::abs(a.uv[i] - b.uv[i]) > kSideUv * uv_extent[a.chart][i]) return false;
     }
   }
   if (!s.colors.empty()) {
     for (int i = 0; i < 4; ++i) {
-      if (std::abs(int(a.color[i]) - int(b.color[i])) > kSameColor) return false;
+      if (std::abs(int(a.color[i]) - int(b.color[i])) > kSideColor) return false;
     }
   }
   return true;
@@ -189,17 +246,61 @@ bool same_side(const Attributes& a, const Attributes& b, const SeamSource& s) {
 
 }  // namespace
 
-bool attributes_differ(const IndexedMesh& mesh, Index a, Index b) {
-  if (!mesh.normals.empty() && mesh.normals[a] != mesh.normals[b]) return true;
-  if (!mesh.uvs.empty() && mesh.uvs[a] != mesh.uvs[b]) return true;
-  return !mesh.colors.empty() && mesh.colors[a] != mesh.colors[b];
+std::vector<Index> same_attribute_targets(const IndexedMesh& mesh,
+                                          const std::vector<Index>& position_target) {
+  const std::size_t n = mesh.positions.size();
+  std::vector<Index> target(n);
+  // Only vertices that share their position need looking at: sorted by position group, then attributes,
+  // then index, each run of equal attributes starts at its lowest index. A sort rather than pairwise
+  // comparisons: one position may have millions of copies (a soup of one repeated triangle).
+  std::vector<Index> shared;
+  for (std::size_t v = 0; v < n; ++v) {
+    target[v] = static_cast<Index>(v);
+    if (position_target[v] != v) {
+      shared.push_back(static_cast<Index>(v));
+      shared.push_back(position_target[v]);  // the position's lowest index, once sorted and made unique
+    }
+  }
+  std::sort(shared.begin(), shared.end());
+  shared.erase(std::unique(shared.begin(), shared.end()), shared.end());
+  // Floats compare as values (-0 equals 0), as the weld does; they are finite (checked before).
+  auto attributes_less = [&](Index a, Index b) {
+    if (!mesh.normals.empty()) {
+      for (int i = 0; i < 3; ++i) {
+        if (mesh.normals[a][i] != mesh.normals[b][i]) return mesh.normals[a][i] < mesh.normals[b][i];
+      }
+    }
+    if (!mesh.uvs.empty()) {
+      for (int i = 0; i < 2; ++i) {
+        if (mesh.uvs[a][i] != mesh.uvs[b][i]) return mesh.uvs[a][i] < mesh.uvs[b][i];
+      }
+    }
+    return !mesh.colors.empty() && mesh.colors[a] < mesh.colors[b];
+  };
+  std::sort(shared.begin(), shared.end(), [&](Index a, Index b) {
+    if (position_target[a] != position_target[b]) return position_target[a] < position_target[b];
+    if (attributes_less(a, b)) return true;
+    if (attributes_less(b, a)) return false;
+    return a < b;
+  });
+  for (std::size_t i = 0; i < shared.size();) {
+    std::size_t j = i + 1;
+    while (j < shared.size() && position_target[shared[j]] == position_target[shared[i]] &&
+           !attributes_less(shared[i], shared[j]))
+      ++j;
+    for (std::size_t k = i; k < j; ++k) target[shared[k]] = shared[i];
+    i = j;
+  }
+  return target;
 }
 
 std::uint64_t restore_seams(const SeamSource& source, const std::vector<Index>& face_origin, IndexedMesh& out,
                             std::vector<Quadric>* quadrics) {
   const std::size_t nv = out.positions.size(), nf = out.triangles.size();
   const FaceLists lists(source);
-  const Walker walker(source, lists);
+  const Charts charts(source, lists);
+  const std::vector<Vec2f> uv_extent = chart_uv_extents(source, charts);
+  const Walker walker(source, lists, charts);
 
   // Each corner's attributes, from its own side.
   std::vector<Attributes> corner(3 * nf);
@@ -231,21 +332,21 @@ std::uint64_t restore_seams(const SeamSource& source, const std::vector<Index>& 
   // corner), in face order, so the numbering depends on the input alone.
   std::vector<Index> side(3 * nf);
   std::vector<Index> sides(nv + 1, 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      std::vector<Index> firsts;
-                      for (std::size_t v = r.begin(); v < r.end(); ++v) {
-                        firsts.clear();
-                        for (std::size_t i = begin[v]; i < begin[v + 1]; ++i) {
-                          const Index c = corners[i];
-                          std::size_t k = 0;
-                          while (k < firsts.size() && !same_side(corner[firsts[k]], corner[c], source)) ++k;
-                          if (k == firsts.size()) firsts.push_back(c);
-                          side[c] = static_cast<Index>(k);
-                        }
-                        sides[v + 1] = static_cast<Index>(std::max<std::size_t>(firsts.size(), 1));
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        std::vector<Index> firsts;
+        for (std::size_t v = r.begin(); v < r.end(); ++v) {
+          firsts.clear();
+          for (std::size_t i = begin[v]; i < begin[v + 1]; ++i) {
+            const Index c = corners[i];
+            std::size_t k = 0;
+            while (k < firsts.size() && !same_side(corner[firsts[k]], corner[c], source, uv_extent)) ++k;
+            if (k == firsts.size()) firsts.push_back(c);
+            side[c] = static_cast<Index>(k);
+          }
+          sides[v + 1] = static_cast<Index>(std::max<std::size_t>(firsts.size(), 1));
+        }
+      });
   for (std::size_t v = 0; v < nv; ++v) sides[v + 1] += sides[v];
   const std::size_t total = sides[nv];
 
@@ -272,19 +373,18 @@ std::uint64_t restore_seams(const SeamSource& source, const std::vector<Index>& 
     const Index v = out.triangles[c / 3][c % 3];
     split.triangles[c / 3][c % 3] = static_cast<Index>(sides[v] + side[c]);
   }
-  // Each side takes its first corner's attributes (sides are numbered in the order their first corners
-  // come, so a corner opening the next side is the first of it).
-  for (std::size_t v = 0; v < nv; ++v) {
-    Index written = 0;
-    for (std::size_t i = begin[v]; i < begin[v + 1]; ++i) {
-      const Index c = corners[i];
-      if (side[c] != written) continue;
-      const std::size_t to = sides[v] + written++;
-      const Attributes& a = corner[c];
-      if (!split.normals.empty()) split.normals[to] = a.normal;
-      if (!split.uvs.empty()) split.uvs[to] = a.uv;
-      if (!split.colors.empty()) split.colors[to] = a.color;
-    }
+  // Each side takes the attributes of its corner whose walk came nearest (the first among equals).
+  std::vector<Index> best(total, kNone);
+  for (std::size_t c = 0; c < 3 * nf; ++c) {
+    const Index to = split.triangles[c / 3][c % 3];
+    if (best[to] == kNone || corner[c].d2 < corner[best[to]].d2) best[to] = static_cast<Index>(c);
+  }
+  for (std::size_t to = 0; to < total; ++to) {
+    if (best[to] == kNone) continue;
+    const Attributes& a = corner[best[to]];
+    if (!split.normals.empty()) split.normals[to] = a.normal;
+    if (!split.uvs.empty()) split.uvs[to] = a.uv;
+    if (!split.colors.empty()) split.colors[to] = a.color;
   }
   out = std::move(split);
   if (quadrics) *quadrics = std::move(split_quadrics);

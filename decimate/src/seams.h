@@ -19,7 +19,8 @@
 
 namespace ocsimp::decimate_detail {
 
-// The input as it was before welding: what the output's attributes are interpolated from.
+// The input as it was before welding, its copies of a vertex with equal attributes merged
+// (same_attribute_targets): what the output's attributes are interpolated from.
 struct SeamSource {
   std::vector<Vec3f> positions;
   std::vector<Triangle> triangles;
@@ -28,8 +29,10 @@ struct SeamSource {
   std::vector<Vec2f> uvs;
 };
 
-// Whether vertex a and b (at one position) carry different attributes, so that welding them joins a seam.
-bool attributes_differ(const IndexedMesh& mesh, Index a, Index b);
+// For each vertex, the lowest index of a vertex at the same position (`position_target`, as welding found
+// it) with the same attributes: the copies a file stores of one vertex (a triangle soup's corners) are one
+// vertex on their side, and only copies that differ are the sides of a seam.
+std::vector<Index> same_attribute_targets(const IndexedMesh& mesh, const std::vector<Index>& position_target);
 
 // Gives every corner of `out` its side's attributes and splits the vertices where sides differ.
 // `face_origin[f]` is the index in source.triangles of the input face output face f descends from; `out`

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -273,6 +274,34 @@ TEST(Cli, ClusterReportCountsClustersLeftOutApartFromTheOutput) {
   EXPECT_EQ(r["output"]["isolated_vertices"].get<long>(), 0);
   EXPECT_EQ(r["cells"]["left_out_without_faces"].get<long>(), 1);
   EXPECT_EQ(analyze_topology(read_mesh(out)).unreferenced_vertices, 0u);
+}
+
+// A textured mesh decimates with its seams kept: the report tells the file's vertices from the positions
+// the vertex target counts, and the summary names the copies.
+TEST(Cli, DecimateReportCountsTheCopiesAlongSeams) {
+  OCSIMP_REQUIRE_SHARED_MESH(spot, "spot.obj");
+  test::TempDir dir;
+  const std::string out = dir / "out.ply", report = dir / "r.json";
+  const CommandResult r = run("decimate " + spot + " -o " + out + " --ratio 0.1 --report " + report, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");  // the OBJ's seams are kept, not smeared
+  const nlohmann::json j = nlohmann::json::parse(file_bytes(report));
+  const IndexedMesh mesh = read_mesh(out);
+  const auto copies = j["output"]["seam_copies"].get<std::size_t>();
+  EXPECT_GT(copies, 0u);
+  EXPECT_EQ(j["output"]["vertices"].get<std::size_t>(), mesh.vertex_count());
+  EXPECT_EQ(j["output"]["positions"].get<std::size_t>() + copies, mesh.vertex_count());
+  std::set<std::array<float, 3>> positions;
+  for (const Vec3f& p : mesh.positions) positions.insert({p.x(), p.y(), p.z()});
+  EXPECT_EQ(positions.size(), j["output"]["positions"].get<std::size_t>());
+  EXPECT_NE(r.out.find(" (+" + std::to_string(copies) + " copies along seams)"), std::string::npos) << r.out;
+  // Through a clustering stage the seams are averaged over, and simplify says so (it said nothing).
+  const CommandResult clustered = run(
+      "simplify -q " + spot + " -o " + (dir / "s.ply") + " --faces 300 --two-stage --intermediate 4", dir);
+  ASSERT_EQ(clustered.exit_code, 0) << clustered.err;
+  EXPECT_NE(clustered.err.find("the clustering stage averages texture coordinates over each of its cells"),
+            std::string::npos)
+      << clustered.err;
 }
 
 // File names are bytes. One that is not UTF-8 made every JSON output fail after the work was done (exit 1,

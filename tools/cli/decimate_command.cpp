@@ -52,7 +52,8 @@ void add_decimate_command(CLI::App& app) {
                   "Also join vertex pairs closer than T (model units) that share no edge")
       ->check(non_negative_number());
   cmd->add_option("--boundary-weight", o.boundary_weight,
-                  "Weight of the planes that hold open borders in place (0: borders move freely)")
+                  "Weight of the planes that hold open borders and texture or normal seams in place (0: they "
+                  "move freely)")
       ->capture_default_str()
       ->check(non_negative_number());
   cmd->add_flag("--lock-boundary", o.lock_boundary, "Border vertices never move or merge with each other");
@@ -130,9 +131,11 @@ void add_decimate_command(CLI::App& app) {
                          {"welded_vertices", s.welded_vertices},
                          {"single_face_vertices", s.single_face_vertices},
                          {"dropped_degenerate_faces", s.dropped_degenerate_faces}};
+      // vertices: the file's; positions: what the vertex target counts (a seam's copies of one count once).
       report["output"] = {{"file", flags->output},
-                          {"vertices", s.vertices},
-                          {"seam_vertices", s.seam_vertices},
+                          {"vertices", result.mesh.vertex_count()},
+                          {"positions", s.vertices},
+                          {"seam_copies", s.seam_copies},
                           {"faces", s.faces}};
       report["options"] = {{"target_faces", options.target_faces},
                            {"target_vertices", options.target_vertices},
@@ -174,8 +177,7 @@ void add_decimate_command(CLI::App& app) {
           "%.3g, peak RSS %s\n",
           flags->input.c_str(), input_faces, static_cast<unsigned long long>(s.faces),
           static_cast<unsigned long long>(s.vertices),
-          s.seam_vertices > 0 ? (" (+" + std::to_string(s.seam_vertices) + " copies along seams)").c_str()
-                              : "",
+          s.seam_copies > 0 ? (" (+" + std::to_string(s.seam_copies) + " copies along seams)").c_str() : "",
           stop_name(s.stop), total_seconds, decimate_seconds, s.max_error,
           format_bytes(peak_rss_bytes()).c_str());
     }

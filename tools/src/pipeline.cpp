@@ -238,6 +238,13 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     return stage;
   }
   intermediate_faces = std::min(intermediate_faces, faces_hint);
+  // Clustering knows no seams: a cell on one averages both sides' texture coordinates.
+  if (held.has_uvs() && options.warn) {
+    options.warn(
+        "the clustering stage averages texture coordinates over each of its cells, so the texture smears "
+        "along uv seams; decimating directly (without --two-stage, an input that fits the memory limit) "
+        "keeps each side's");
+  }
   ClusterOptions cluster_options = options.cluster;
   cluster_options.octree = true;
   cluster_options.target_vertices = 0;
