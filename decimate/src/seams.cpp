@@ -141,10 +141,18 @@ class Walker {
   // uses it).
   Attributes at(Index start, const Vec3d& p) const {
     Nearest best;
+    // A fan looked at once has nothing more to offer: best only gets nearer. Walks are a few steps long,
+    // so a short list does.
+    thread_local std::vector<Index> seen;
+    seen.assign(1, start);
     visit_fan(start, p, best);
     for (int step = 0; step < kMaxSteps && best.face != kNone; ++step) {
       const Index current = best.face;
-      for (Index v : s_.triangles[current]) visit_fan(v, p, best);
+      for (Index v : s_.triangles[current]) {
+        if (std::find(seen.begin(), seen.end(), v) != seen.end()) continue;
+        seen.push_back(v);
+        visit_fan(v, p, best);
+      }
       if (best.face == current) break;
     }
     Attributes a = best.face == kNone ? vertex_attributes(start) : interpolate(best);
