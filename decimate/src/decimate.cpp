@@ -236,20 +236,6 @@ Index number_kept(std::size_t n, Index* out, const Keep& keep) {
   return first[chunks];
 }
 
-// A position's bits, with -0 read as +0 so that equal coordinates compare equal.
-struct PositionKey {
-  std::uint32_t bits[3];
-  explicit PositionKey(const Vec3f& p) {
-    for (int a = 0; a < 3; ++a) bits[a] = std::bit_cast<std::uint32_t>(p[a] == 0.0f ? 0.0f : p[a]);
-  }
-  bool operator==(const PositionKey&) const = default;
-  std::uint64_t hash() const {
-    std::uint64_t h = (std::uint64_t{bits[0]} << 32 | bits[1]) * 0x9E3779B97F4A7C15ull;
-    h ^= (h >> 29) + bits[2] * 0xBF58476D1CE4E5B9ull;
-    return h ^ (h >> 32);
-  }
-};
-
 // For each vertex, the lowest index of a vertex at the same position (itself when there is none). Hashing
 // rather than sorting: welding is on by default, so every decimation pays for it, and a sort of the positions
 // took a fifth of a 1 M-triangle decimation. The vertices are first spread over buckets by hash, in index

@@ -34,27 +34,6 @@ bool starts_with(std::string_view text, std::string_view prefix) {
   return text.size() >= prefix.size() && text.substr(0, prefix.size()) == prefix;
 }
 
-// Position bits -> vertex index, for welding the corners of a soup. Keyed on exact bit patterns (with -0
-// folded onto +0), so welding never moves a point.
-struct PositionKey {
-  std::uint32_t x, y, z;
-  bool operator==(const PositionKey&) const = default;
-};
-struct PositionKeyHash {
-  std::size_t operator()(const PositionKey& k) const {
-    std::uint64_t h = k.x * 0x9E3779B97F4A7C15ull;
-    h ^= (h >> 29) + k.y * 0xBF58476D1CE4E5B9ull;
-    h ^= (h >> 31) + k.z * 0x94D049BB133111EBull;
-    return static_cast<std::size_t>(h ^ (h >> 32));
-  }
-};
-std::uint32_t float_key(float f) {
-  if (f == 0.0f) f = 0.0f;
-  std::uint32_t bits;
-  std::memcpy(&bits, &f, sizeof bits);
-  return bits;
-}
-
 }  // namespace
 
 const char* format_name(FileFormat format) {
@@ -186,7 +165,7 @@ IndexedMesh drain(TriangleStream& source) {
         Triangle t;
         for (int k = 0; k < 3; ++k) {
           const Vec3f& p = batch.corners[i][k];
-          const PositionKey key{float_key(p.x()), float_key(p.y()), float_key(p.z())};
+          const PositionKey key(p);
           auto [it, inserted] = index_of.try_emplace(key, static_cast<Index>(mesh.positions.size()));
           if (inserted) {
             if (mesh.positions.size() >= std::numeric_limits<Index>::max()) {

@@ -4,6 +4,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <array>
+#include <bit>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 
@@ -21,6 +23,28 @@ using Triangle = std::array<Index, 3>;
 inline bool has_repeated_corner(const Triangle& t) {
   return t[0] == t[1] || t[1] == t[2] || t[2] == t[0];
 }
+// A position's exact bits, with -0 folded onto +0 so that equal coordinates have one key: welding by it
+// never moves a point. For hash maps (PositionKeyHash) and hand-made tables (hash()).
+struct PositionKey {
+  std::uint32_t bits[3];
+  explicit PositionKey(const Eigen::Vector3f& p) {
+    for (int a = 0; a < 3; ++a) {
+      const float f = p[a] == 0.0f ? 0.0f : p[a];
+      bits[a] = std::bit_cast<std::uint32_t>(f);
+    }
+  }
+  bool operator==(const PositionKey&) const = default;
+  std::uint64_t hash() const {
+    std::uint64_t h = bits[0] * 0x9E3779B97F4A7C15ull;
+    h ^= (h >> 29) + bits[1] * 0xBF58476D1CE4E5B9ull;
+    h ^= (h >> 31) + bits[2] * 0x94D049BB133111EBull;
+    return h ^ (h >> 32);
+  }
+};
+struct PositionKeyHash {
+  std::size_t operator()(const PositionKey& k) const { return static_cast<std::size_t>(k.hash()); }
+};
+
 // RGBA, 8 bits a channel: what PLY, Draco and most scanners store.
 using Color = std::array<std::uint8_t, 4>;
 
