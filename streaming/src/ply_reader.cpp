@@ -445,10 +445,16 @@ class PlyStream final : public TriangleStream {
   bool fast_faces_ = false;   // the face record is just the index list
   std::uint64_t face_offset_ = 0, face_line_ = 0, face_bytes_ = 0;
   std::optional<std::size_t> wedge_property_;  // the face element's per-corner "texcoord" list
-  // ReadOptions::split_corner_attributes: the corners whose texcoord disagrees with their vertex's first,
-  // by (face record, corner), and the copy of the vertex each reads instead.
+  // ReadOptions::split_corner_attributes: the corners whose texcoord disagrees with their vertex's first, in
+  // file order, with the copy of the vertex each reads instead; the faces meet them in that order, so a
+  // cursor finds each (next_copy_).
+  struct CornerCopy {
+    std::uint64_t record, corner;
+    Index copy;
+  };
   bool split_ = false;
-  std::map<std::pair<std::uint64_t, std::uint64_t>, Index> corner_copies_;
+  std::vector<CornerCopy> corner_copies_;
+  std::size_t next_copy_ = 0;
   std::uint64_t triangles_hint_ = 0;
   std::uint64_t bytes_total_ = 0;
 
@@ -1239,10 +1245,9 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
     return;
   }
   check_corner(index, offset);
-  if (!corner_copies_.empty()) {
-    if (const auto copy = corner_copies_.find({current_record_, corners_seen_}); copy != corner_copies_.end())
-      index = copy->second;
-  }
+  if (next_copy_ < corner_copies_.size() && corner_copies_[next_copy_].record == current_record_ &&
+      corner_copies_[next_copy_].corner == corners_seen_)
+    index = corner_copies_[next_copy_++].copy;
   if (strips_) {
     if (corners_seen_ >= 2) {
       // Every other triangle of a strip is wound the other way; skip the degenerate ones that join strips.
@@ -1364,7 +1369,7 @@ void PlyStream::load_wedge_uvs() {
       const auto v = static_cast<std::size_t>(corners[k]);
       const Vec2f value(uv[2 * k], uv[2 * k + 1]);
       take_first_corner(given, vertices_.uvs, v, value, seams);
-      if (split_ && !strips_ && vertices_.uvs[v] != value) {
+      if (split_ && vertices_.uvs[v] != value) {
         // One copy per vertex and distinct texcoord, at the vertex's position with its other attributes.
         if (vertices_.positions.size() >= std::numeric_limits<Index>::max())
           fail("too many vertices once texture seams are split, in " + where());
@@ -1376,7 +1381,7 @@ void PlyStream::load_wedge_uvs() {
           if (!vertices_.colors.empty()) vertices_.colors.push_back(vertices_.colors[v]);
           vertices_.uvs.push_back(value);
         }
-        corner_copies_.emplace(std::pair(current_record_, std::uint64_t{k}), at->second);
+        corner_copies_.push_back({current_record_, k, at->second});
       }
     }
     end_record();
