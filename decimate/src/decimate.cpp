@@ -1464,7 +1464,7 @@ struct Decimator {
           for (std::size_t f = 0; f < nf; ++f) {
             const Face& t = faces[f];
             if (t.v[0] == kNone) continue;
-            if (!origin_of.empty()) origin_of[nf_new] = origin_of[f];
+            if (storage.seams) origin_of[nf_new] = origin_of[f];
             faces[nf_new++] = {{id[t.v[0]], id[t.v[1]], id[t.v[2]]},
                                {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
                                {t.ref[0], t.ref[1]},
@@ -1488,7 +1488,7 @@ struct Decimator {
     staged_edge = kNone;
     verts.resize(nv_new);
     faces.resize(nf_new);
-    if (!storage.face_origin.empty()) storage.face_origin.resize(nf_new);
+    if (storage.seams) storage.face_origin.resize(nf_new);
     edges.resize(ne_new);
     if (!normals.empty()) normals.resize(nv_new);
     if (!colors.empty()) colors.resize(nv_new);

@@ -114,10 +114,11 @@ struct Charts {
 
   Charts(const SeamSource& s, const FaceLists& lists) : parent(s.positions.size()) {
     for (std::size_t v = 0; v < parent.size(); ++v) parent[v] = static_cast<Index>(v);
+    // Each corner joins its face's first corner: every face's three corners end up joined, at one join a
+    // corner.
     for (std::size_t v = 0; v < parent.size(); ++v) {
-      for (std::size_t i = lists.begin[v]; i < lists.begin[v + 1]; ++i) {
-        for (Index w : s.triangles[lists.faces[i]]) join(static_cast<Index>(v), w);
-      }
+      for (std::size_t i = lists.begin[v]; i < lists.begin[v + 1]; ++i)
+        join(static_cast<Index>(v), s.triangles[lists.faces[i]][0]);
     }
     for (std::size_t v = 0; v < parent.size(); ++v) parent[v] = find(static_cast<Index>(v));
   }
