@@ -120,6 +120,13 @@ CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
       wanted);
 }
 
+void add_weld_flag(CLI::App* cmd, bool& weld) {
+  cmd->add_flag("--weld,!--no-weld", weld,
+                "Merge vertices at exactly equal positions before decimating, so seams and the corners of a "
+                "triangle soup move as one (default; each side of a texture or normal seam keeps its "
+                "attributes). --no-weld: each copy is a separate border");
+}
+
 CLI::Validator byte_size() {
   return CLI::Validator(
       [](std::string& text) -> std::string {

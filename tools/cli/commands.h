@@ -44,6 +44,9 @@ CLI::Validator thread_count();
 // A memory size parse_byte_size() takes, of at least one byte ("0" and "0.5" meant the default before).
 CLI::Validator byte_size();
 
+// --weld / --no-weld, for each command that decimates (DecimateOptions::weld).
+void add_weld_flag(CLI::App* cmd, bool& weld);
+
 // A progress callback that draws a bar on stderr when it is a terminal and `quiet` is false; otherwise
 // a callback that does nothing.
 ProgressFn make_progress(bool quiet);

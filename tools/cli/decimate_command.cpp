@@ -68,11 +68,7 @@ void add_decimate_command(CLI::App& app) {
                   "Penalty on collapses across normal, color or uv differences (0: geometry only)")
       ->capture_default_str()
       ->check(non_negative_number());
-  cmd->add_flag(
-      "--weld,!--no-weld", o.weld,
-      "Merge vertices at exactly equal positions first, so seams and the corners of a triangle soup "
-      "move as one (default; each side of a texture or normal seam keeps its attributes). "
-      "--no-weld: each copy is a separate border");
+  add_weld_flag(cmd, o.weld);
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());

@@ -76,10 +76,7 @@ void add_simplify_command(CLI::App& app) {
       "--intermediate", o.intermediate,
       "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8, and at "
       "least 262,144 faces where the budget has room)");
-  cmd->add_flag("--weld,!--no-weld", o.decimate.weld,
-                "Merge vertices at exactly equal positions before decimating, so seams and the corners of a "
-                "triangle soup move as one (default; each side of a texture or normal seam keeps its "
-                "attributes). --no-weld: each copy is a separate border");
+  add_weld_flag(cmd, o.decimate.weld);
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());

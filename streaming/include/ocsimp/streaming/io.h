@@ -54,9 +54,10 @@ struct ReadOptions {
   std::function<void(const std::string& message)> warn;
   // A vertex whose face corners give it different texture coordinates or normals (an OBJ's vt and vn, a PLY
   // face's texcoord list: a uv seam, a hard edge) becomes one vertex per distinct value, at the same
-  // position, instead of keeping its first corner's (and no warning is due). For the commands that decimate, which weld such copies back for the collapses
-  // and keep each side's attributes (DecimateOptions::weld). Off by default: a vertex of the file stays one
-  // vertex (what `info` counts). Ignored out of core, where the corners' attributes are not read.
+  // position, instead of keeping its first corner's (and no warning is due). For the commands that
+  // decimate, which weld such copies back for the collapses and keep each side's attributes
+  // (DecimateOptions::weld). Off by default: a vertex of the file stays one vertex (what `info` counts).
+  // Ignored out of core, where the corners' attributes are not read.
   bool split_corner_attributes = false;
   // Whether read_mesh refuses a file without faces (a PLY's empty face element says so at its header line).
   // `info` and `convert` read them: ocsimp writes one when every triangle of a clustering collapses.
