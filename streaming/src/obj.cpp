@@ -21,6 +21,7 @@
 #include <map>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include "byte_reader.h"
@@ -603,6 +604,64 @@ char* print_index(char* out, Index i) {
   return std::to_chars(out, out + 12, std::uint64_t(i) + 1).ptr;
 }
 
+// The `v` line of each vertex. A texture seam or hard edge holds one vertex per side at one position (a
+// reader asked to split corners, or the decimator, writes such copies); OBJ indexes positions apart from uvs
+// and normals, so the sides share one `v` line and each corner names its own `vt` and `vn`. The file is then
+// closed where the surface is, as the input was, rather than cut open along every seam. Copies whose uv and
+// normal are equal too are no seam but a crack the mesh has, and keep lines of their own. Without uvs or
+// normals every vertex keeps its own line.
+std::vector<Index> position_lines(const IndexedMesh& mesh, Index* lines) {
+  const std::size_t n = mesh.positions.size();
+  std::vector<Index> line(n);
+  if (!mesh.has_uvs() && !mesh.has_normals()) {
+    for (std::size_t v = 0; v < n; ++v) line[v] = static_cast<Index>(v);
+    *lines = static_cast<Index>(n);
+    return line;
+  }
+  struct Key {
+    PositionKey position;
+    Color color;
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::uint32_t c;
+      std::memcpy(&c, k.color.data(), sizeof c);
+      return static_cast<std::size_t>(k.position.hash() ^ (c * 0x9E3779B97F4A7C15ull));
+    }
+  };
+  // Per key, the first vertex of the group its next copy would join; groups are chained through `next`.
+  std::unordered_map<Key, Index, KeyHash> group_of;
+  std::vector<Index> next(n, kNone);
+  auto same_attributes = [&](std::size_t a, std::size_t b) {
+    const bool uv = !mesh.has_uvs() || mesh.uvs[a] == mesh.uvs[b];
+    const bool normal = !mesh.has_normals() || mesh.normals[a] == mesh.normals[b];
+    return uv && normal;
+  };
+  Index count = 0;
+  for (std::size_t v = 0; v < n; ++v) {
+    const Key key{PositionKey(mesh.positions[v]), mesh.has_colors() ? mesh.colors[v] : Color{}};
+    auto [it, inserted] = group_of.try_emplace(key, static_cast<Index>(v));
+    if (!inserted) {
+      Index last = it->second;
+      bool crack = same_attributes(last, v);
+      while (!crack && next[last] != kNone) {
+        last = next[last];
+        crack = same_attributes(last, v);
+      }
+      if (!crack) {
+        next[last] = static_cast<Index>(v);
+        line[v] = line[it->second];
+        continue;
+      }
+      it->second = static_cast<Index>(v);  // a new group, which later copies join
+    }
+    line[v] = count++;
+  }
+  *lines = count;
+  return line;
+}
+
 }  // namespace
 
 std::unique_ptr<TriangleStream> open_obj_stream(const std::string& path, const ReadOptions& options) {
@@ -611,12 +670,16 @@ std::unique_ptr<TriangleStream> open_obj_stream(const std::string& path, const R
 
 void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
   check_writable(path, mesh);
+  Index lines = 0;
+  const std::vector<Index> line = position_lines(mesh, &lines);
   AtomicFile file(path);
-  file.write("# ocsimp: " + std::to_string(mesh.positions.size()) + " vertices, " +
-             std::to_string(mesh.triangles.size()) + " triangles\n");
+  file.write("# ocsimp: " + std::to_string(lines) + " vertices, " + std::to_string(mesh.triangles.size()) +
+             " triangles\n");
   const bool colors = mesh.has_colors(), uvs = mesh.has_uvs(), normals = mesh.has_normals();
   const bool shifted = mesh.origin != Vec3d::Zero();
-  for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+  for (std::size_t i = 0, written = 0; i < mesh.positions.size(); ++i) {
+    if (line[i] != written) continue;  // a seam copy: its group's line is out
+    ++written;
     char* const start = file.reserve(128);  // "v", 3 doubles and 3 floats with their separators, "\n"
     char* p = start;
     *p++ = 'v';
@@ -666,7 +729,7 @@ void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOpti
     *p++ = 'f';
     for (Index v : mesh.triangles[f]) {
       *p++ = ' ';
-      p = print_index(p, v);
+      p = print_index(p, line[v]);
       if (uvs || normals) {
         *p++ = '/';
         if (uvs) p = print_index(p, v);

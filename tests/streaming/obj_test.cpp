@@ -449,6 +449,52 @@ TEST(Obj, SplitsCornersThatDisagreeOnRequest) {
   EXPECT_EQ(m.vertex_count(), 8u);
 }
 
+// The copies a split reading makes (or the decimator writes along a seam) share one `v` line again: the
+// file has the input's 4 positions and is closed where it was, while every corner keeps its own uv and
+// normal.
+TEST(Obj, SeamCopiesShareTheirPositionLine) {
+  TempDir dir;
+  ReadOptions split;
+  split.split_corner_attributes = true;
+  test::write_file_bytes(dir / "seams.obj", kSeamsObj);
+  const IndexedMesh m = read_mesh(dir / "seams.obj", split);
+  ASSERT_EQ(m.vertex_count(), 8u);
+  write_mesh(dir / "out.obj", m);
+  const std::string text = test::read_file_bytes(dir / "out.obj");
+  std::size_t v_lines = 0;
+  for (std::size_t at = text.find("\nv "); at != std::string::npos; at = text.find("\nv ", at + 1)) ++v_lines;
+  EXPECT_EQ(v_lines, 4u);
+  const IndexedMesh plain = read_mesh(dir / "out.obj");
+  EXPECT_EQ(plain.vertex_count(), 4u);
+  const IndexedMesh back = read_mesh(dir / "out.obj", split);
+  ASSERT_EQ(back.face_count(), m.face_count());
+  for (std::size_t f = 0; f < m.face_count(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(back.positions[back.triangles[f][k]], m.positions[m.triangles[f][k]]) << f << " " << k;
+      EXPECT_EQ(back.uvs[back.triangles[f][k]], m.uvs[m.triangles[f][k]]) << f << " " << k;
+      EXPECT_EQ(back.normals[back.triangles[f][k]], m.normals[m.triangles[f][k]]) << f << " " << k;
+    }
+  }
+}
+
+// Two vertices at one position with the same uv are not the sides of a seam but a crack in the mesh: the
+// writer keeps it, and the copies with another uv join the first of them.
+TEST(Obj, CopiesWithEqualAttributesKeepLinesOfTheirOwn) {
+  TempDir dir;
+  IndexedMesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {1, 0, 0}};
+  m.uvs = {{0, 0}, {1, 0}, {0, 1}, {1, 0}, {0, 1}, {1, 1}, {0.5f, 0}};
+  m.triangles = {{0, 1, 2}, {3, 5, 4}, {6, 5, 3}};
+  write_mesh(dir / "crack.obj", m);
+  const IndexedMesh plain = read_mesh(dir / "crack.obj");
+  // Vertices 3 and 4 repeat 1 and 2 with their uvs: 6 lines; vertex 6 (another uv at 1's position) joins
+  // the group of 3, the latest at that position.
+  ASSERT_EQ(plain.vertex_count(), 6u);
+  EXPECT_EQ(plain.triangles[0], (Triangle{0, 1, 2}));
+  EXPECT_EQ(plain.triangles[1], (Triangle{3, 5, 4}));
+  EXPECT_EQ(plain.triangles[2][0], 3u);
+}
+
 // spot's uv seams, split: every corner reads its own vt, and the copies sit exactly on their vertex, so
 // the surface is as closed as before once positions are taken as one.
 TEST(ObjShared, SpotSplitGivesEveryCornerItsOwnUv) {

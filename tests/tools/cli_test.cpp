@@ -304,6 +304,46 @@ TEST(Cli, DecimateReportCountsTheCopiesAlongSeams) {
       << clustered.err;
 }
 
+// An OBJ output gives a seam's sides one `v` line: spot decimated, or only converted, is as closed as spot
+// (its `info` counted every seam edge as a border), and each corner still names its own uv.
+TEST(Cli, ObjOutputsStayClosedAcrossTextureSeams) {
+  OCSIMP_REQUIRE_SHARED_MESH(spot, "spot.obj");
+  test::TempDir dir;
+  const std::string decimated = dir / "d.obj", converted = dir / "c.obj", report = dir / "r.json";
+  const CommandResult d =
+      run("decimate -q " + spot + " -o " + decimated + " --ratio 0.1 --report " + report, dir);
+  ASSERT_EQ(d.exit_code, 0) << d.err;
+  const nlohmann::json j = nlohmann::json::parse(file_bytes(report));
+  ASSERT_GT(j["output"]["seam_copies"].get<std::size_t>(), 0u);
+  const CommandResult c = run("convert -q " + spot + " " + converted, dir);
+  ASSERT_EQ(c.exit_code, 0) << c.err;
+  EXPECT_EQ(c.err, "");  // the seams are kept, not smeared
+  for (const std::string& path : {decimated, converted}) {
+    const CommandResult info = run("info --json " + path, dir);
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    const nlohmann::json facts = nlohmann::json::parse(info.out);
+    EXPECT_EQ(facts["boundary_edges"].get<long>(), 0) << path;
+    EXPECT_EQ(facts["non_manifold_vertices"].get<long>(), 0) << path;
+    EXPECT_EQ(facts["components"].get<long>(), 1) << path;
+  }
+  const auto positions = j["output"]["positions"].get<long>();
+  EXPECT_EQ(nlohmann::json::parse(run("info --json " + decimated, dir).out)["vertices"].get<long>(),
+            positions);
+  // The conversion keeps spot's own numbers of v and vt records, and every corner's uv.
+  const IndexedMesh source = read_mesh(spot), copy = read_mesh(converted);
+  EXPECT_EQ(copy.vertex_count(), source.vertex_count());
+  ReadOptions split;
+  split.split_corner_attributes = true;
+  const IndexedMesh a = read_mesh(spot, split), b = read_mesh(converted, split);
+  ASSERT_EQ(a.face_count(), b.face_count());
+  for (std::size_t f = 0; f < a.face_count(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_EQ(a.uvs[a.triangles[f][k]], b.uvs[b.triangles[f][k]]) << f;
+      ASSERT_EQ(a.positions[a.triangles[f][k]], b.positions[b.triangles[f][k]]) << f;
+    }
+  }
+}
+
 // File names are bytes. One that is not UTF-8 made every JSON output fail after the work was done (exit 1,
 // and a decimated mesh written without its report).
 TEST(Cli, JsonOutputsNameAFileWhoseNameIsNotUtf8) {
@@ -1020,7 +1060,7 @@ TEST(Cli, APlysPerCornerTextureCoordinatesReachTheOutput) {
 }
 
 // Where face corners disagree on a vertex's texture coordinates or normal, every command that reads the file
-// says so in one warning line (a mesh here holds one of each per vertex), and still succeeds.
+// and keeps one of each per vertex says so in one warning line, and still succeeds.
 TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
   test::TempDir dir;
   const std::string obj = dir / "seam.obj";
@@ -1034,12 +1074,21 @@ TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
   const std::vector<std::string> decimating = {"decimate -q " + obj + " -o " + (dir / "d.ply") + " --faces 1",
                                                "simplify -q " + obj + " -o " + (dir / "s.ply") + " --faces 1",
                                                "lod -q " + obj + " -o " + (dir / "l.ply") + " --faces 1"};
-  for (const std::string& command : {"info " + obj, "convert -q " + obj + " " + (dir / "c.ply"),
-                                     "cluster -q " + obj + " -o " + (dir / "k.ply") + " --grid 4"}) {
+  for (const std::string& command :
+       {"info " + obj, "cluster -q " + obj + " -o " + (dir / "k.ply") + " --grid 4"}) {
     const CommandResult r = run(command, dir);
     EXPECT_EQ(r.exit_code, 0) << command << ": " << r.err;
     EXPECT_EQ(r.err, smears) << command;
   }
+  // convert keeps both sides: a PLY output holds the seam's vertex once per side, each with its own uv.
+  const CommandResult converted = run("convert -q " + obj + " " + (dir / "c.ply"), dir);
+  EXPECT_EQ(converted.exit_code, 0) << converted.err;
+  EXPECT_EQ(converted.err, "");
+  const IndexedMesh c = read_mesh(dir / "c.ply");
+  ASSERT_EQ(c.vertex_count(), 5u);
+  EXPECT_EQ(c.positions[c.triangles[0][0]], c.positions[c.triangles[1][0]]);
+  EXPECT_EQ(c.uvs[c.triangles[0][0]], Vec2f(0, 0));
+  EXPECT_EQ(c.uvs[c.triangles[1][0]], Vec2f(0.5f, 0.5f));
   // The commands that decimate read each side of the seam as its own vertex and weld them back, keeping
   // both sides' texture coordinates: nothing smears, unless welding is off.
   for (const std::string& command : decimating) {

@@ -33,6 +33,10 @@ void add_convert_command(CLI::App& app) {
     read.progress = console.progress;
     read.warn = console.warn;
     read.faces_required = false;  // a mesh without faces converts too, with write_result's warning
+    // Every corner keeps its own uv and normal: a seam's sides become vertices of their own at one position,
+    // which an OBJ output joins again in its `v` lines (an OBJ converts to an OBJ unchanged but for
+    // numbering) and PLY and Draco outputs keep as separate vertices, as glTF-style files do.
+    read.split_corner_attributes = true;
     // A copy: stored in the flags, which outlive the command, the bar's last owner kept its line open
     // until after main printed an error, which then ran on after the bar.
     WriteOptions write = flags->write;
