@@ -295,6 +295,19 @@ TEST(Cli, DecimateReportCountsTheCopiesAlongSeams) {
   for (const Vec3f& p : mesh.positions) positions.insert({p.x(), p.y(), p.z()});
   EXPECT_EQ(positions.size(), j["output"]["positions"].get<std::size_t>());
   EXPECT_NE(r.out.find(" (+" + std::to_string(copies) + " copies along seams)"), std::string::npos) << r.out;
+  // simplify and lod, which decimate in core here, count them the same way.
+  const CommandResult simplified = run(
+      "simplify -q " + spot + " -o " + (dir / "s.ply") + " --ratio 0.1 --report " + (dir / "s.json"), dir);
+  ASSERT_EQ(simplified.exit_code, 0) << simplified.err;
+  const nlohmann::json sj = nlohmann::json::parse(file_bytes(dir / "s.json"));
+  EXPECT_EQ(sj["output_seam_copies"].get<std::size_t>(), copies);
+  EXPECT_EQ(sj["output_vertices"].get<std::size_t>(), read_mesh(dir / "s.ply").vertex_count());
+  const CommandResult levels =
+      run("lod -q " + spot + " -o " + (dir / "l_{faces}.ply") + " --ratios 0.1 --report " + (dir / "l.json"),
+          dir);
+  ASSERT_EQ(levels.exit_code, 0) << levels.err;
+  const nlohmann::json lj = nlohmann::json::parse(file_bytes(dir / "l.json"));
+  EXPECT_EQ(lj["levels"][0]["seam_copies"].get<std::size_t>(), copies);
   // Through a clustering stage the seams are averaged over, and simplify says so (it said nothing).
   const CommandResult clustered = run(
       "simplify -q " + spot + " -o " + (dir / "s.ply") + " --faces 300 --two-stage --intermediate 4", dir);

@@ -198,6 +198,10 @@ bool show_summary(bool quiet) {
   return !quiet && ::isatty(STDOUT_FILENO);
 }
 
+std::string seam_copies_note(std::uint64_t copies) {
+  return copies > 0 ? " (+" + std::to_string(copies) + " copies along seams)" : "";
+}
+
 void print_phase_table(const std::vector<PhaseReport>& phases) {
   std::printf("%-14s %10s %14s %14s %12s\n", "phase", "seconds", "triangles in", "triangles out", "peak RSS");
   for (const PhaseReport& p : phases) {

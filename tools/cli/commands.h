@@ -110,6 +110,9 @@ std::unique_ptr<tbb::global_control> limit_threads(int threads);
 // Whether the end-of-run summary goes to stdout: not with --quiet, and not on a pipe or file (where only
 // errors are written; --report gives the same numbers as JSON).
 bool show_summary(bool quiet);
+// What a summary says after a count of positions when the decimator wrote a texture seam's vertex once per
+// side (DecimateStats::seam_copies): " (+N copies along seams)", or nothing.
+std::string seam_copies_note(std::uint64_t copies);
 
 // The phases as the summary table (phase, time, triangles in and out, peak RSS) on stdout, and as the JSON
 // array of {name, seconds, triangles_in, triangles_out, peak_rss_bytes} the reports share.

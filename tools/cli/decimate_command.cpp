@@ -172,8 +172,7 @@ void add_decimate_command(CLI::App& app) {
           "%s: %zu faces -> %llu faces, %llu vertices%s (%s) in %.2f s (decimate %.2f s), largest cost "
           "%.3g, peak RSS %s\n",
           flags->input.c_str(), input_faces, static_cast<unsigned long long>(s.faces),
-          static_cast<unsigned long long>(s.vertices),
-          s.seam_copies > 0 ? (" (+" + std::to_string(s.seam_copies) + " copies along seams)").c_str() : "",
+          static_cast<unsigned long long>(s.vertices), seam_copies_note(s.seam_copies).c_str(),
           stop_name(s.stop), total_seconds, decimate_seconds, s.max_error,
           format_bytes(peak_rss_bytes()).c_str());
     }

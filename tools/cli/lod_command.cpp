@@ -21,8 +21,10 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   input_faces         triangles read (polygons fan-triangulated)
   clustered, out_of_core, intermediate_faces, memory_limit_bytes, peak_rss_bytes, seconds   as in simplify
   max_error           the last (smallest) level's max_error
-  levels              largest first: [{target_faces, faces, vertices, file, seconds, max_error, level_max_error,
-                      target_reached, stop}], and target_ratio with --ratios; max_error is the largest
+  levels              largest first: [{target_faces, faces, vertices, seam_copies, file, seconds, max_error,
+                      level_max_error, target_reached, stop}], and target_ratio with --ratios (vertices
+                      counts a texture seam's vertex once per side, seam_copies those beyond the first, as
+                      in ocsimp decimate); max_error is the largest
                       collapse cost down the chain up to this level, or the clustering stage's vertex error
                       where larger, as an RMS distance to the original's planes (carried quadrics; not a
                       Hausdorff bound); level_max_error is this level's own run's largest cost
@@ -184,6 +186,7 @@ void add_lod_command(CLI::App& app) {
         nlohmann::json entry = {{"target_faces", level.target_faces},
                                 {"faces", level.faces},
                                 {"vertices", vertices[i]},
+                                {"seam_copies", level.decimate.seam_copies},
                                 {"file", files[i]},
                                 {"seconds", level.seconds},
                                 {"max_error", level.max_error},
@@ -204,12 +207,15 @@ void add_lod_command(CLI::App& app) {
     }
     if (show_summary(flags->quiet)) {
       print_phase_table(result.phases);
-      std::printf("\n%-12s %12s %10s %14s  %s\n", "level", "faces", "seconds", "max error", "file");
+      std::printf("\n%-12s %12s %12s %10s %14s  %s\n", "level", "faces", "vertices", "seconds", "max error",
+                  "file");
       for (std::size_t i = 0; i < result.levels.size(); ++i) {
         const LodLevel& level = result.levels[i];
-        std::printf("%-12llu %12llu %10.3f %14.6g  %s\n", static_cast<unsigned long long>(level.target_faces),
-                    static_cast<unsigned long long>(level.faces), level.seconds, level.max_error,
-                    files[i].c_str());
+        std::printf("%-12llu %12llu %12llu %10.3f %14.6g  %s%s\n",
+                    static_cast<unsigned long long>(level.target_faces),
+                    static_cast<unsigned long long>(level.faces),
+                    static_cast<unsigned long long>(vertices[i] - level.decimate.seam_copies), level.seconds,
+                    level.max_error, files[i].c_str(), seam_copies_note(level.decimate.seam_copies).c_str());
       }
       std::printf(
           "total %.3f s from %llu input faces%s%s, peak RSS %s; max error is a distance to the original\n",

@@ -17,7 +17,8 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   command             "simplify"
   input, output       the paths
   input_faces         triangles read (polygons fan-triangulated)
-  output_faces        faces written; output_vertices likewise
+  output_faces        faces written; output_vertices likewise (a texture seam's vertex once per side)
+  output_seam_copies  vertices written beyond the first at a seam's position (see ocsimp decimate)
   clustered           whether the clustering stage ran (input over the in-core budget, or --two-stage)
   out_of_core         whether the input's vertices were dereferenced on disk (their array did not fit what
                       clustering leaves of the budget)
@@ -116,6 +117,7 @@ void add_simplify_command(CLI::App& app) {
       report["input_faces"] = result.input_faces;
       report["output_faces"] = result.mesh.face_count();
       report["output_vertices"] = result.mesh.vertex_count();
+      report["output_seam_copies"] = result.decimate.seam_copies;
       report["clustered"] = result.clustered;
       report["out_of_core"] = result.out_of_core;
       report["intermediate_faces"] = result.intermediate_faces;
@@ -135,11 +137,14 @@ void add_simplify_command(CLI::App& app) {
     }
     if (show_summary(flags->quiet)) {
       print_phase_table(result.phases);
-      std::printf("%-14s %10.3f   %s -> %s: %zu faces, max error %.6g (distance)%s%s, peak RSS %s\n", "total",
-                  total, flags->input.c_str(), flags->output.c_str(), result.mesh.face_count(),
-                  result.max_error(), result.clustered ? ", clustered first" : "",
-                  result.out_of_core ? ", vertices dereferenced on disk" : "",
-                  format_bytes(peak_rss_bytes()).c_str());
+      std::printf(
+          "%-14s %10.3f   %s -> %s: %zu faces, %zu vertices%s, max error %.6g (distance)%s%s, peak RSS %s\n",
+          "total", total, flags->input.c_str(), flags->output.c_str(), result.mesh.face_count(),
+          result.mesh.vertex_count() - result.decimate.seam_copies,
+          seam_copies_note(result.decimate.seam_copies).c_str(), result.max_error(),
+          result.clustered ? ", clustered first" : "",
+          result.out_of_core ? ", vertices dereferenced on disk" : "",
+          format_bytes(peak_rss_bytes()).c_str());
     }
   });
 }
