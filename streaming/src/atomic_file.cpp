@@ -93,6 +93,21 @@ bool writes_directly(const std::string& path) {
   return ::stat(path.c_str(), &info) == 0 && !S_ISREG(info.st_mode) && !S_ISDIR(info.st_mode);
 }
 
+// An unnamed file in `folder` (O_TMPFILE), or -1 where the file system or kernel has none, or where the
+// finished file could not be given a name through /proc/self/fd (see AtomicFile::commit). A process killed
+// outright (SIGKILL, the kernel's out-of-memory killer) then leaves nothing behind, where a named temporary
+// stayed in the output's folder: as large as the output got before the kill.
+int open_unnamed(const std::string& folder) {
+  const int fd = ::open(folder.c_str(), O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600);
+  if (fd < 0) return -1;
+  struct stat info {};
+  if (::stat(("/proc/self/fd/" + std::to_string(fd)).c_str(), &info) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
 // The longest file name the temporary's decoration leaves room for: a name a few bytes under the file
 // system's limit of 255 (NAME_MAX) is valid, but its temporary was not.
 constexpr std::size_t kTempDecoration = std::string_view(".").size() + std::string_view(".tmp.XXXXXX").size();
@@ -122,6 +137,12 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), buffer_(buffe
   std::string temp_name(".");
   temp_name.append(target.filename().string().substr(0, kNameMax - kTempDecoration)).append(".tmp.XXXXXX");
   std::string pattern = (folder / temp_name).string();
+  fd_ = open_unnamed(folder.string());
+  if (fd_ >= 0) {
+    unnamed_ = true;
+    temp_path_ = pattern;  // the name commit() gives it, with its Xs replaced
+    return;
+  }
   fd_ = mkstemp(pattern.data());
   if (fd_ < 0) throw Error(path_, {}, system_reason("cannot create a temporary file in " + folder.string()));
   temp_path_ = pattern;
@@ -131,7 +152,7 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), buffer_(buffe
 AtomicFile::~AtomicFile() {
   if (!committed_) {
     if (fd_ >= 0) ::close(fd_);
-    if (direct_) return;
+    if (direct_ || (unnamed_ && !named_)) return;  // an unnamed file is gone with its descriptor
     ::unlink(temp_path_.c_str());
     unregister_live(temp_path_);
   }
@@ -192,6 +213,7 @@ void AtomicFile::commit() {
     ::umask(mask);
     ::fchmod(fd_, 0666 & ~mask);
   }
+  if (unnamed_) give_name();
   if (::close(fd_) != 0) {
     fd_ = -1;
     throw Error(path_, {}, system_reason("close failed"));
@@ -202,6 +224,29 @@ void AtomicFile::commit() {
   }
   committed_ = true;
   unregister_live(temp_path_);
+}
+
+// Links the unnamed file into its folder under a fresh temporary name, for the rename: linkat cannot replace
+// an existing file, and rename needs a name to move. Registered at once, so that SIGINT, SIGTERM and SIGHUP
+// remove it in the moment before the rename.
+void AtomicFile::give_name() {
+  const std::string proc = "/proc/self/fd/" + std::to_string(fd_);
+  static std::atomic<unsigned> counter{0};
+  const std::size_t x = temp_path_.rfind("XXXXXX");
+  for (int attempt = 0; attempt < 1000; ++attempt) {
+    std::string name = temp_path_;
+    const unsigned long n = (static_cast<unsigned long>(::getpid()) << 16) ^ counter++ ^ (attempt * 7919ul);
+    static constexpr char kDigits[] = "0123456789abcdefghijklmnopqrstuvwxyz";
+    for (std::size_t i = 0; i < 6; ++i) name[x + i] = kDigits[(n >> (5 * i)) % 36];
+    if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, name.c_str(), AT_SYMLINK_FOLLOW) == 0) {
+      temp_path_ = name;
+      named_ = true;
+      register_live(temp_path_);
+      return;
+    }
+    if (errno != EEXIST) break;
+  }
+  throw Error(path_, {}, system_reason("cannot name the finished temporary file"));
 }
 
 }  // namespace ocsimp

@@ -724,39 +724,49 @@ TEST(Cli, AReportThatWouldOverwriteAMeshIsRefused) {
   }
 }
 
-TEST(Cli, InterruptedGenLeavesNoFile) {
-  test::TempDir dir;
-  const std::string out = dir / "big.ply";
-  const pid_t child = fork();
-  ASSERT_GE(child, 0);
-  if (child == 0) {
-    execl(kOcsimp.c_str(), kOcsimp.c_str(), "gen", "-q", "-o", out.c_str(), "--triangles", "400000000",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  // Wait until the temporary exists, so the kill lands mid-write.
-  bool started = false;
-  for (int i = 0; i < 200 && !started; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    for (const auto& entry : std::filesystem::directory_iterator(dir.path)) {
-      if (entry.path().filename().string().find("big.ply") != std::string::npos) started = true;
-    }
-  }
-  EXPECT_TRUE(started);
-  kill(child, SIGTERM);
-  int status = 0;
-  waitpid(child, &status, 0);
-  EXPECT_TRUE(WIFSIGNALED(status));
-  for (const auto& entry : std::filesystem::directory_iterator(dir.path)) {
-    EXPECT_EQ(entry.path().filename().string().find("big.ply"), std::string::npos) << entry.path();
-  }
-}
-
+// Whether process `pid` holds a file open in `folder` (its output's temporary, named or not).
 std::vector<std::string> names_in(const std::string& dir) {
   std::vector<std::string> names;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) names.push_back(entry.path().filename());
   std::sort(names.begin(), names.end());
   return names;
+}
+
+bool writes_in(pid_t pid, const std::string& folder) {
+  std::error_code error;
+  for (const auto& fd : std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/fd", error)) {
+    const std::string target = std::filesystem::read_symlink(fd.path(), error).string();
+    if (!error && target.rfind(folder + "/", 0) == 0) return true;
+  }
+  return false;
+}
+
+// Killed while it writes, by a signal it can catch or by SIGKILL (as the out-of-memory killer does), gen
+// leaves the folder as it was: its output is an unnamed file until it is complete.
+TEST(Cli, InterruptedGenLeavesNoFile) {
+  for (const int signal : {SIGTERM, SIGKILL}) {
+    test::TempDir dir;
+    const std::string out = dir / "big.ply";
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      execl(kOcsimp.c_str(), kOcsimp.c_str(), "gen", "-q", "-o", out.c_str(), "--triangles", "400000000",
+            static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    // Wait until the output is open, so the kill lands mid-write.
+    bool started = false;
+    for (int i = 0; i < 400 && !started; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      started = writes_in(child, std::filesystem::canonical(dir.path).string());
+    }
+    EXPECT_TRUE(started) << signal;
+    kill(child, signal);
+    int status = 0;
+    waitpid(child, &status, 0);
+    EXPECT_TRUE(WIFSIGNALED(status)) << signal;
+    EXPECT_TRUE(names_in(dir.path).empty()) << signal << ": left " << names_in(dir.path)[0];
+  }
 }
 
 void expect_keys(const nlohmann::json& object, std::initializer_list<const char*> keys) {
@@ -1285,16 +1295,18 @@ TEST(Cli, InterruptedSimplifyAndLodLeaveNoOutput) {
       killed_while_running({"simplify", "-q", scan, "-o", out, "--faces", "1000"}, tmp, SIGTERM, {out}));
   EXPECT_EQ(names_in(dir.path), before);
   // SIGKILL through the out-of-core path: the dereferencing files were unlinked when created, so TMPDIR is
-  // empty; an output temporary may remain, the output itself must not exist.
+  // empty, and the output's temporary has no name until it is complete, so the folder is as it was too.
   EXPECT_TRUE(killed_while_running(
       {"simplify", "-q", scan, "-o", out, "--faces", "1000", "--memory-limit", "8M"}, tmp, SIGKILL, {out}));
   EXPECT_FALSE(std::filesystem::exists(out));
   EXPECT_TRUE(names_in(tmp).empty());
+  EXPECT_EQ(names_in(dir.path), before);
   const std::string lod_1000 = dir / "lod_1000.ply", lod_100 = dir / "lod_100.ply";
   EXPECT_TRUE(killed_while_running({"lod", "-q", scan, "-o", dir / "lod_{faces}.ply", "--faces", "1000,100"},
                                    tmp, SIGKILL, {lod_1000, lod_100}));
   EXPECT_FALSE(std::filesystem::exists(lod_1000));
   EXPECT_FALSE(std::filesystem::exists(lod_100));
+  EXPECT_EQ(names_in(dir.path), before);
 }
 
 }  // namespace

@@ -9,9 +9,11 @@
 
 namespace ocsimp {
 
-// Buffered writer to a hidden temporary file in the target's folder. commit() flushes, closes and renames it
-// over the target; destruction without commit() (an exception, an early return) deletes the temporary. A
-// SIGINT/SIGTERM/SIGHUP handler deletes every live temporary before the process dies. A path that is a
+// Buffered writer to a temporary file in the target's folder: unnamed (O_TMPFILE) where the file system has
+// them, so that no way of dying leaves it behind, otherwise hidden. commit() flushes it, gives it a hidden
+// name, closes it and renames it over the target; destruction without commit() (an exception, an early
+// return) deletes the temporary. A SIGINT/SIGTERM/SIGHUP handler deletes every named temporary before the
+// process dies. A path that is a
 // symbolic link is written through: the target is the file at the end of its links, and they stay links.
 // A path that exists as neither a regular file nor a folder (a device such as /dev/null, a FIFO,
 // /dev/stdout on a pipe) is written directly, as a stream: no rename could replace it, and what was sent
@@ -37,6 +39,7 @@ class AtomicFile {
 
  private:
   void flush();
+  void give_name();
 
   std::string path_;         // as given, for messages
   std::string target_path_;  // what the rename replaces: path_ with its symbolic links followed
@@ -46,7 +49,9 @@ class AtomicFile {
   std::size_t used_ = 0;
   std::uint64_t flushed_ = 0;
   bool committed_ = false;
-  bool direct_ = false;  // writing straight to path_ (not a regular file), no temporary
+  bool direct_ = false;   // writing straight to path_ (not a regular file), no temporary
+  bool unnamed_ = false;  // an O_TMPFILE file, until give_name() links it as temp_path_
+  bool named_ = false;
 };
 
 // Throws the error that writing `path` would meet, before any work: creates and deletes a temporary beside
