@@ -456,6 +456,37 @@ TEST(Decimate, ALongFlatStripDecimatesAlongItsLengthInOnePiece) {
   }
 }
 
+// A strip whose quads are already slivers (1 by 0.001, quality 0.0017): decimating along its length makes
+// every triangle thinner, which the floor of half the input quality blocked at once, so under
+// --preserve-topology it stopped at 113 faces for 10. Faces that start as slivers may now get 50 times
+// thinner.
+TEST(Decimate, AStripOfSliversDecimatesAlongItsLength) {
+  IndexedMesh strip;
+  constexpr int kQuads = 100;
+  for (int j = 0; j <= 1; ++j)
+    for (int i = 0; i <= kQuads; ++i) strip.positions.emplace_back(float(i), 0.001f * float(j), 0.0f);
+  for (Index i = 0; i < kQuads; ++i) {
+    strip.triangles.push_back({i, i + 1, kQuads + 2 + i});
+    strip.triangles.push_back({i, kQuads + 2 + i, kQuads + 1 + i});
+  }
+  DecimateOptions options = faces(10);
+  options.preserve_topology = true;
+  const DecimateResult r = run(strip, options);
+  ASSERT_EQ(r.mesh.face_count(), 10u) << r.stats.reason;
+  EXPECT_EQ(analyze_topology(r.mesh).components, 1u);
+  double area = 0;
+  for (const Triangle& t : r.mesh.triangles) {
+    EXPECT_GT(face_normal(r.mesh, t).z(), 0);
+    area += 0.5 * face_normal(r.mesh, t).norm();
+  }
+  // Measured: 0.0785. Each short end pinches to a point, half the width (0.0005) from its corners, which is
+  // all the quadrics see; the strip then tapers toward its tips.
+  EXPECT_GT(area, 0.7 * 0.1);
+  for (const Vec3f& p : r.mesh.positions) {
+    EXPECT_TRUE(p.x() >= 0 && p.x() <= 100 && p.y() >= 0 && p.y() <= 0.001f && p.z() == 0) << p.transpose();
+  }
+}
+
 TEST(Decimate, CubeKeepsItsCorners) {
   const IndexedMesh cube = test::cube(6);
   for (std::uint64_t target : {100u, 12u}) {
