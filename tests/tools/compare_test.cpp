@@ -257,6 +257,42 @@ TEST(DistanceIndex, SamplesAreUniformByArea) {
   EXPECT_NEAR(double(first) / count, 0.25, 2.0 / count);
 }
 
+// A triangle stored many times (here 3,000 times, once through vertices of its own, corners turned) is
+// indexed once: queries find the same points at the same distances, name its first copy, and samples are
+// still drawn on every copy, as on the mesh the file holds.
+TEST(DistanceIndex, RepeatedTrianglesMeasureAsOnce) {
+  const IndexedMesh once = test::sphere(2);
+  IndexedMesh repeated = once;
+  const Triangle t = once.triangles[7];
+  const Vec3d a0 = once.positions[t[0]].cast<double>(), a1 = once.positions[t[1]].cast<double>(),
+              a2 = once.positions[t[2]].cast<double>();
+  const double t_area = 0.5 * (a1 - a0).cross(a2 - a0).norm();
+  for (int i = 0; i < 1000; ++i) {
+    repeated.triangles.push_back(t);
+    repeated.triangles.push_back({t[1], t[2], t[0]});
+  }
+  const Index own = static_cast<Index>(repeated.positions.size());
+  for (int k = 0; k < 3; ++k) repeated.positions.push_back(once.positions[t[k]]);
+  for (int i = 0; i < 1000; ++i) repeated.triangles.push_back({own + 2, own, own + 1});
+  const DistanceIndex a(once), b(repeated);
+  EXPECT_NEAR(b.area(), a.area() + 3000 * t_area, 1e-9 * b.area());
+  std::mt19937 random(5);
+  std::uniform_real_distribution<double> coordinate(-2, 2);
+  for (int i = 0; i < 2000; ++i) {
+    const Vec3d p(coordinate(random), coordinate(random), coordinate(random));
+    const ClosestPoint x = a.closest_point(p), y = b.closest_point(p);
+    ASSERT_EQ(x.distance_squared, y.distance_squared) << p.transpose();
+    EXPECT_EQ(x.point, y.point);
+    EXPECT_EQ(x.triangle, y.triangle);  // the copies come after the original, which wins the tie
+  }
+  // Samples on the copies: the triangle holds 3001 / (3000 + sphere area / its area) of them.
+  const double share = 3001 * t_area / b.area();
+  std::size_t on_it = 0;
+  const std::vector<Vec3d> samples = b.sample_surface(20000, 3);
+  for (const Vec3d& p : samples) on_it += a.closest_point(p).triangle == 7;
+  EXPECT_NEAR(double(on_it) / double(samples.size()), share, 0.02);
+}
+
 TEST(DistanceIndex, DegenerateTrianglesAreNeverSampledAndStillMeasured) {
   IndexedMesh mesh = test::grid_square(2);
   const Index far = static_cast<Index>(mesh.positions.size());

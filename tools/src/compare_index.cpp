@@ -11,8 +11,10 @@
 #include "compare_index.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <new>
 #include <utility>
@@ -103,6 +105,51 @@ constexpr double kLooseBoxes = 8;
 constexpr int kSplitReplications = 8, kSplitReplicationsLarge = 2;
 constexpr std::size_t kSplitManyTriangles = std::size_t{1} << 20;
 
+// The triangles of `mesh` that repeat an earlier one exactly (the same three positions, in any order), in
+// ascending order. A BVH query near a triangle stored k times visits all k copies: `compare` of a file of
+// 1,000 copies of one triangle with itself took 39 s, and 10,000 copies did not finish in two minutes.
+// Found by sorting hashes of the corner positions, so that a mesh without repeats costs a parallel pass and
+// a sort of 16 bytes a triangle (freed before the BVH is built, which takes more).
+std::vector<Index> repeated_triangles(const IndexedMesh& mesh) {
+  const std::size_t n = mesh.triangles.size();
+  auto sorted_keys = [&](std::size_t f) {
+    std::array<PositionKey, 3> k{PositionKey(mesh.positions[mesh.triangles[f][0]]),
+                                 PositionKey(mesh.positions[mesh.triangles[f][1]]),
+                                 PositionKey(mesh.positions[mesh.triangles[f][2]])};
+    std::sort(k.begin(), k.end(), [](const PositionKey& a, const PositionKey& b) {
+      return std::lexicographical_compare(a.bits, a.bits + 3, b.bits, b.bits + 3);
+    });
+    return k;
+  };
+  std::vector<std::pair<std::uint64_t, Index>> keyed(n);
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t f) {
+    const auto k = sorted_keys(f);
+    std::uint64_t h = k[0].hash();
+    h = (h ^ k[1].hash()) * 0x9E3779B97F4A7C15ull;
+    h = (h ^ k[2].hash()) * 0xBF58476D1CE4E5B9ull;
+    keyed[f] = {h ^ (h >> 31), static_cast<Index>(f)};
+  });
+  tbb::parallel_sort(keyed.begin(), keyed.end());
+  std::vector<Index> repeated;
+  for (std::size_t i = 0; i < n;) {
+    std::size_t end = i + 1;
+    while (end < n && keyed[end].first == keyed[i].first) ++end;
+    // Within a run of equal hashes (ids ascending), a triangle repeats an earlier one when their keys match.
+    for (std::size_t j = i + 1; j < end; ++j) {
+      const auto kj = sorted_keys(keyed[j].second);
+      for (std::size_t e = i; e < j; ++e) {
+        if (sorted_keys(keyed[e].second) == kj) {
+          repeated.push_back(keyed[j].second);
+          break;
+        }
+      }
+    }
+    i = end;
+  }
+  std::sort(repeated.begin(), repeated.end());
+  return repeated;
+}
+
 void remember_embree_error(void* user, RTCError code, const char* message) {
   auto* impl = static_cast<DistanceIndex::Impl*>(user);
   impl->device_error = message ? message : "";
@@ -160,12 +207,25 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   std::vector<double>& cumulative = impl.cumulative_area;
   cumulative.resize(mesh.triangles.size() + 1);
   std::vector<double> box_area((mesh.triangles.size() + grain - 1) / grain, 0.0);
+  const std::vector<Index> repeated = repeated_triangles(mesh);
+  const std::size_t primitives = mesh.triangles.size() - repeated.size();
+  if (!repeated.empty()) {
+    impl.all_corners.resize(3 * mesh.triangles.size());
+    impl.triangle_of_primitive.reserve(primitives);
+    for (std::size_t f = 0, r = 0; f < mesh.triangles.size(); ++f) {
+      if (r < repeated.size() && repeated[r] == f) {
+        ++r;
+      } else {
+        impl.triangle_of_primitive.push_back(static_cast<Index>(f));
+      }
+    }
+  }
   RTCGeometry geometry = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
   if (!geometry) throw_embree_error(impl, "creating a geometry");
   auto* positions = static_cast<float*>(rtcSetNewGeometryBuffer(
       geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertex_count));
   auto* corners = static_cast<Index*>(rtcSetNewGeometryBuffer(
-      geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(Index), mesh.triangles.size()));
+      geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(Index), primitives));
   if (!positions || !corners) {
     rtcReleaseGeometry(geometry);
     throw_embree_error(impl, "allocating the mesh buffers");
@@ -173,10 +233,19 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   const auto embree_scale = static_cast<float>(impl.embree_scale);
   for (std::size_t v = 0; v < vertex_count; ++v)
     for (int k = 0; k < 3; ++k) positions[3 * v + k] = mesh.positions[v][k] * embree_scale;
-  for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
-    for (int k = 0; k < 3; ++k) corners[3 * f + k] = mesh.triangles[f][k];
+  if (repeated.empty()) {
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+      for (int k = 0; k < 3; ++k) corners[3 * f + k] = mesh.triangles[f][k];
+    impl.corners = corners;
+  } else {
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+      for (int k = 0; k < 3; ++k) impl.all_corners[3 * f + k] = mesh.triangles[f][k];
+    for (std::size_t i = 0; i < primitives; ++i)
+      for (int k = 0; k < 3; ++k) corners[3 * i + k] = mesh.triangles[impl.triangle_of_primitive[i]][k];
+    impl.corners = impl.all_corners.data();
+  }
   impl.positions = positions;
-  impl.corners = corners;
+  impl.primitive_corners = corners;
   impl.vertex_count = vertex_count;
   impl.triangle_count = mesh.triangles.size();
 
@@ -272,7 +341,9 @@ float culling_radius(double distance, double margin) {
 bool visit_triangle(RTCPointQueryFunctionArguments* args) {
   auto& query = *static_cast<PointQuery*>(args->userPtr);
   const DistanceIndex::Impl& index = *query.index;
-  const Index* t = index.corners + 3 * std::size_t{args->primID};
+  const Index* t = index.primitive_corners + 3 * std::size_t{args->primID};
+  const Index triangle = index.triangle_of_primitive.empty() ? static_cast<Index>(args->primID)
+                                                             : index.triangle_of_primitive[args->primID];
   const Vec3d a = index.vertex(t[0]), b = index.vertex(t[1]), c = index.vertex(t[2]);
   // Embree culls nodes, not the triangles of a leaf. The distance to the triangle's box is a lower bound that
   // rejects most of them for a fraction of the exact test; the relative slack keeps rounding from ever
@@ -286,8 +357,8 @@ bool visit_triangle(RTCPointQueryFunctionArguments* args) {
   if (d2 > query.limit_squared) return false;
   // Ties go to the lower triangle id, so the reported point does not depend on the traversal order either.
   if (d2 < query.best.distance_squared ||
-      (d2 == query.best.distance_squared && args->primID < query.best.triangle)) {
-    query.best = {point, d2, static_cast<Index>(args->primID)};
+      (d2 == query.best.distance_squared && triangle < query.best.triangle)) {
+    query.best = {point, d2, triangle};
     const float radius = culling_radius(std::sqrt(d2) * index.embree_scale, query.margin);
     if (radius < args->query->radius) {
       args->query->radius = radius;

@@ -21,9 +21,14 @@ struct DistanceIndex::Impl {
 
   // The mesh, in the buffers Embree allocated for it (vertex buffers padded for its 16-byte loads).
   const float* positions = nullptr;  // 3 a vertex
-  const Index* corners = nullptr;    // 3 a triangle
+  const Index* corners = nullptr;    // 3 a triangle, every triangle of the mesh (what samples are drawn on)
   std::size_t vertex_count = 0;
   std::size_t triangle_count = 0;
+  // What the BVH holds: the same triangles, less exact repeats (see DistanceIndex's constructor), whose
+  // ids then map back through `triangle_of_primitive`; `corners` is then `all_corners`.
+  const Index* primitive_corners = nullptr;
+  std::vector<Index> triangle_of_primitive;  // empty when every triangle is a primitive
+  std::vector<Index> all_corners;
 
   std::vector<double> cumulative_area;     // triangle_count + 1 entries, from 0 to the total area
   std::size_t last_sampled_triangle = 0;   // the last triangle of positive area
