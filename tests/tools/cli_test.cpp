@@ -741,6 +741,22 @@ bool writes_in(pid_t pid, const std::string& folder) {
   return false;
 }
 
+// Past the shell's file-size limit a write fails, as when a disk fills: one error line and exit 2, and no
+// file left. The kernel's SIGXFSZ had killed the process without a word (exit 153), leaving its temporary.
+TEST(Cli, AFileSizeLimitIsAWriteError) {
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply", out = dir / "out.ply";
+  write_mesh(mesh, test::sphere(5));  // 8 k faces: about 130 KB as binary PLY
+  const std::string command =
+      "ulimit -f 64; " + kOcsimp + " convert -q " + mesh + " " + out + " 2>" + (dir / "stderr.txt");
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 2);
+  const std::string err = file_bytes(dir / "stderr.txt");
+  EXPECT_EQ(err, "ocsimp: " + out + ": write failed: File too large\n");
+  EXPECT_EQ(names_in(dir.path), (std::vector<std::string>{"in.ply", "stderr.txt"}));
+}
+
 // Killed while it writes, by a signal it can catch or by SIGKILL (as the out-of-memory killer does), gen
 // leaves the folder as it was: its output is an unnamed file until it is complete.
 TEST(Cli, InterruptedGenLeavesNoFile) {

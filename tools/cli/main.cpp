@@ -1,4 +1,5 @@
 // ocsimp: simplify triangle meshes of any size. One subcommand per file in this folder.
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <string>
@@ -9,6 +10,9 @@
 #include "ocsimp/core/system.h"
 
 int main(int argc, char** argv) {
+  // Past the shell's file-size limit (ulimit -f) a write fails with EFBIG, reported like any other failed
+  // write, rather than the kernel killing the process without a word.
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"ocsimp: simplify triangle meshes of any size (streaming clustering + QEM decimation)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "ocsimp 0.1.0");
