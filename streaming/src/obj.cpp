@@ -276,8 +276,7 @@ class ObjStream final : public TriangleStream {
     const int count = vertices_.origin != Vec3d::Zero() ? parse_far_vertex(p, end, values)
                                                         : parse_numbers(p, end, values, 7);
     if (count != 3 && count != 4 && count != 6 && count != 7)
-      fail("a vertex needs x y z, optionally w, optionally r g b (found " + std::to_string(count) +
-           " numbers)");
+      fail("a vertex needs x y z, optionally w, optionally r g b (found " + counted(count, "number") + ")");
     if (seen_.v >= kNone) fail("more than 2^32-2 vertices");
     const Vec3f position(values[0], values[1], values[2]);
     if (!origin_sample_.settled) {

@@ -139,10 +139,13 @@ class HeaderParser {
     const char* newline = static_cast<const char*>(std::memchr(begin, '\n', available));
     if (newline == nullptr) {
       if (available >= kMaxHeaderLine) fail("header line too long (binary data before end_header?)");
-      fail("the header ends without an end_header line");
+      // An end_header as the file's last line, without a line ending, ends a file without data.
+      std::string_view last(begin, available);
+      last = last.substr(0, last.find_last_not_of(" \t\r") + 1);
+      if (last != "end_header") fail("the header ends without an end_header line");
     }
-    std::size_t length = static_cast<std::size_t>(newline - begin);
-    reader_.consume(length + 1);
+    std::size_t length = newline ? static_cast<std::size_t>(newline - begin) : available;
+    reader_.consume(newline ? length + 1 : length);
     if (length > 0 && begin[length - 1] == '\r') --length;
     return std::string_view(begin, length);
   }

@@ -695,7 +695,9 @@ std::string_view PlyStream::ascii_token(PlyType type) {
   while (cursor_ < lines_end_ && *cursor_ != ' ' && *cursor_ != '\t' && *cursor_ != '\r' && *cursor_ != '\n')
     ++cursor_;
   if (cursor_ == begin) {
-    fail(std::string("the line ends early: expected a ") + ply_type_name(type) + " in " + where());
+    const std::string name = ply_type_name(type);
+    fail("the line ends early: expected " + std::string(name[0] == 'i' ? "an " : "a ") + name + " in " +
+         where());
   }
   return std::string_view(begin, static_cast<std::size_t>(cursor_ - begin));
 }

@@ -95,9 +95,9 @@ class BinaryStlParser {
     const std::uint64_t needed = kHeaderBytes + 4 + kTriangleBytes * std::uint64_t(count);
     if (needed > reader_.file_size())
       throw Error(path, FilePosition::byte(kHeaderBytes),
-                  "binary STL header claims " + std::to_string(count) + " triangles (" +
-                      std::to_string(needed) + " bytes) but the file has " +
-                      std::to_string(reader_.file_size()) + " bytes" + ascii_lookalike(reader_));
+                  "binary STL header claims " + counted(count, "triangle") + " (" + std::to_string(needed) +
+                      " bytes) but the file has " + std::to_string(reader_.file_size()) + " bytes" +
+                      ascii_lookalike(reader_));
     reader_.consume(kHeaderBytes + 4);
     if (needed < reader_.file_size()) {
       // Writers that stream their triangles sometimes leave the count at 0, or at a first batch's: when
@@ -110,13 +110,13 @@ class BinaryStlParser {
         const auto read = static_cast<std::uint32_t>(
             std::min<std::uint64_t>(held, std::numeric_limits<std::uint32_t>::max()));
         if (warn)
-          warn("the binary STL header claims " + std::to_string(count) + " triangles, but the file holds " +
+          warn("the binary STL header claims " + counted(count, "triangle") + ", but the file holds " +
                std::to_string(held) + "; " + (read == held ? "all " : "the first ") + std::to_string(read) +
                " are read");
         count = read;
       } else if (warn) {
-        warn("the " + std::to_string(extra) + " bytes after the " + std::to_string(count) +
-             " triangles the binary STL header claims (byte " + std::to_string(needed) +
+        warn("the " + counted(extra, "byte") + " after the " + counted(count, "triangle") +
+             " the binary STL header claims (byte " + std::to_string(needed) +
              " on) are not whole triangles, and are ignored");
       }
     }

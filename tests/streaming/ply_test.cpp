@@ -1257,6 +1257,41 @@ TEST(PlyMalformed, AFileWithoutFacesReadsWhenFacesAreNotRequired) {
   EXPECT_EQ(mesh.face_count(), 0u);
 }
 
+// An end_header as the file's last line, without a line ending, ends an empty mesh (it was "the header ends
+// without an end_header line"); any other last line without one still ends a header that is cut short.
+TEST(PlyMalformed, AnEndHeaderWithoutALineEndingEndsAnEmptyFile) {
+  test::TempDir dir;
+  const std::string header =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 0\nproperty list uchar int vertex_indices\n";
+  ReadOptions options;
+  options.faces_required = false;
+  for (const char* last : {"end_header", "end_header \r"}) {
+    write_bytes(dir / "empty.ply", header + last);
+    const IndexedMesh mesh = read_mesh(dir / "empty.ply", options);
+    EXPECT_EQ(mesh.vertex_count() + mesh.face_count(), 0u) << last;
+  }
+  write_bytes(dir / "cut.ply", header + "end_hea");
+  try {
+    read_mesh(dir / "cut.ply", options);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.reason(), "the header ends without an end_header line");
+    EXPECT_EQ(e.position().value, 9u);
+  }
+  // And a record cut short names the type it expected with its article.
+  write_bytes(dir / "short.ply",
+              "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty int z\n"
+              "element face 0\nproperty list uchar int vertex_indices\nend_header\n1.5 2.5\n");
+  try {
+    read_mesh(dir / "short.ply", options);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(e.reason().find("expected an int in record 0 of element vertex"), std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(PlyMalformedFolder, EveryFileHasATest) {
   std::set<std::string> listed;
   for (const Malformed& m : kMalformed) listed.insert(m.file);

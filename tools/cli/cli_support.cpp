@@ -259,9 +259,9 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
     // Draco's encoder leaves them out, without a word of its own.
     const auto repeated = std::count_if(mesh.triangles.begin(), mesh.triangles.end(), has_repeated_corner);
     if (repeated > 0) {
-      std::fprintf(stderr,
-                   "ocsimp: warning: %s: %td faces with a repeated corner are left out (Draco drops them)\n",
-                   path.c_str(), repeated);
+      std::fprintf(stderr, "ocsimp: warning: %s: %s with a repeated corner %s left out (Draco drops them)\n",
+                   path.c_str(), counted(static_cast<std::uint64_t>(repeated), "face").c_str(),
+                   repeated == 1 ? "is" : "are");
     }
   }
 }

@@ -36,4 +36,9 @@ class Error : public std::runtime_error {
   std::string reason_;
 };
 
+// "1 triangle", "2 triangles": a count and its noun, for messages; `plural` where an added s is wrong.
+inline std::string counted(std::uint64_t n, const std::string& noun, const std::string& plural = {}) {
+  return std::to_string(n) + " " + (n == 1 ? noun : plural.empty() ? noun + "s" : plural);
+}
+
 }  // namespace ocsimp
