@@ -221,6 +221,16 @@ TEST(DistanceIndex, RejectsMeshesItCannotMeasure) {
   IndexedMesh huge = test::grid_square(1);
   huge.positions[1].x() = 1e30f;
   EXPECT_THROW(measure_distance(test::grid_square(2), huge), Error);
+  // A mesh whose coordinates are all subnormal floats is refused as too small (every query had missed it,
+  // and the message blamed a point "too far from this mesh").
+  IndexedMesh subnormal = test::grid_square(1);
+  for (Vec3f& p : subnormal.positions) p *= 1e-40f;
+  try {
+    measure_distance(subnormal, subnormal);
+    FAIL() << "a mesh of subnormal coordinates was measured";
+  } catch (const Error& e) {
+    EXPECT_NE(e.reason().find("too small to measure"), std::string::npos) << e.what();
+  }
   EXPECT_THROW(measure_distance(IndexedMesh{}, test::grid_square(2)), Error);
   EXPECT_THROW(measure_distance(test::grid_square(2), IndexedMesh{}), Error);
   CompareOptions nothing;

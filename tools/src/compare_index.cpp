@@ -16,6 +16,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <new>
 #include <utility>
 
@@ -191,6 +193,15 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   impl.bounds = mesh.bounds();
   impl.coordinate_scale =
       std::max(impl.bounds.lo.cwiseAbs().maxCoeff(), impl.bounds.hi.cwiseAbs().maxCoeff());
+  // Below float's normal range the coordinates are subnormal, which Embree's threads read as zero (they set
+  // the flush-to-zero modes): every query then missed the mesh and was called "too far from this mesh".
+  if (impl.coordinate_scale > 0 && impl.coordinate_scale < std::numeric_limits<float>::min()) {
+    char largest[32];
+    std::snprintf(largest, sizeof largest, "%.3g", impl.coordinate_scale);
+    throw Error(impl.name, {},
+                std::string("the mesh is too small to measure: its largest coordinate, ") + largest +
+                    ", is below float's normal range (1.18e-38)");
+  }
   if (impl.coordinate_scale > 0 && (impl.coordinate_scale < 0x1p-20 || impl.coordinate_scale > 0x1p20))
     impl.embree_scale = std::ldexp(1.0, -std::ilogb(impl.coordinate_scale));
 
