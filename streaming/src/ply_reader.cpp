@@ -1066,7 +1066,7 @@ void PlyStream::load_positions_directly() {
   const std::uint64_t bytes = vertex_count_ * kRecord;
   // What the reader's window already holds is copied from there.
   const std::size_t held = static_cast<std::size_t>(std::min<std::uint64_t>(reader_.available(), bytes));
-  std::memcpy(out, reader_.data(), held);
+  if (held > 0) std::memcpy(out, reader_.data(), held);  // (with no vertices, out and data may be null)
 
   struct Piece {
     std::size_t first = 0, count = 0;  // records
