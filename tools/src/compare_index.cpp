@@ -107,12 +107,12 @@ constexpr double kLooseBoxes = 8;
 constexpr int kSplitReplications = 8, kSplitReplicationsLarge = 2;
 constexpr std::size_t kSplitManyTriangles = std::size_t{1} << 20;
 
-// The triangles of `mesh` that repeat an earlier one exactly (the same three positions, in any order), in
-// ascending order. A BVH query near a triangle stored k times visits all k copies: `compare` of a file of
-// 1,000 copies of one triangle with itself took 39 s, and 10,000 copies did not finish in two minutes.
-// Found by sorting hashes of the corner positions, so that a mesh without repeats costs a parallel pass and
-// a sort of 16 bytes a triangle (freed before the BVH is built, which takes more).
-std::vector<Index> repeated_triangles(const IndexedMesh& mesh) {
+// The triangles of `mesh` that do not repeat an earlier one exactly (the same three positions, in any order),
+// ascending; empty when none repeats. A BVH query near a triangle stored k times visits all k copies:
+// `compare` of a file of 1,000 copies of one triangle with itself took 39 s, and 10,000 copies did not finish
+// in two minutes. Found by sorting hashes of the corner positions, so that a mesh without repeats costs a
+// parallel pass and a sort of 16 bytes a triangle (freed before the BVH is built, which takes more).
+std::vector<Index> first_copies(const IndexedMesh& mesh) {
   const std::size_t n = mesh.triangles.size();
   auto sorted_keys = [&](std::size_t f) {
     std::array<PositionKey, 3> k{PositionKey(mesh.positions[mesh.triangles[f][0]]),
@@ -132,24 +132,25 @@ std::vector<Index> repeated_triangles(const IndexedMesh& mesh) {
     keyed[f] = {h ^ (h >> 31), static_cast<Index>(f)};
   });
   tbb::parallel_sort(keyed.begin(), keyed.end());
-  std::vector<Index> repeated;
+  std::vector<std::uint8_t> repeats(n, 0);
+  bool any = false;
   for (std::size_t i = 0; i < n;) {
     std::size_t end = i + 1;
     while (end < n && keyed[end].first == keyed[i].first) ++end;
     // Within a run of equal hashes (ids ascending), a triangle repeats an earlier one when their keys match.
     for (std::size_t j = i + 1; j < end; ++j) {
       const auto kj = sorted_keys(keyed[j].second);
-      for (std::size_t e = i; e < j; ++e) {
-        if (sorted_keys(keyed[e].second) == kj) {
-          repeated.push_back(keyed[j].second);
-          break;
-        }
+      for (std::size_t e = i; e < j && !repeats[keyed[j].second]; ++e) {
+        if (sorted_keys(keyed[e].second) == kj) repeats[keyed[j].second] = 1, any = true;
       }
     }
     i = end;
   }
-  std::sort(repeated.begin(), repeated.end());
-  return repeated;
+  std::vector<Index> first;
+  if (!any) return first;
+  for (std::size_t f = 0; f < n; ++f)
+    if (!repeats[f]) first.push_back(static_cast<Index>(f));
+  return first;
 }
 
 void remember_embree_error(void* user, RTCError code, const char* message) {
@@ -196,11 +197,10 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   // Below float's normal range the coordinates are subnormal, which Embree's threads read as zero (they set
   // the flush-to-zero modes): every query then missed the mesh and was called "too far from this mesh".
   if (impl.coordinate_scale > 0 && impl.coordinate_scale < std::numeric_limits<float>::min()) {
-    char largest[32];
-    std::snprintf(largest, sizeof largest, "%.3g", impl.coordinate_scale);
-    throw Error(impl.name, {},
-                std::string("the mesh is too small to measure: its largest coordinate, ") + largest +
-                    ", is below float's normal range (1.18e-38)");
+    char text[96];
+    std::snprintf(text, sizeof text, "its largest coordinate, %.3g, is below float's normal range (%.3g)",
+                  impl.coordinate_scale, double(std::numeric_limits<float>::min()));
+    throw Error(impl.name, {}, std::string("the mesh is too small to measure: ") + text);
   }
   if (impl.coordinate_scale > 0 && (impl.coordinate_scale < 0x1p-20 || impl.coordinate_scale > 0x1p20))
     impl.embree_scale = std::ldexp(1.0, -std::ilogb(impl.coordinate_scale));
@@ -218,19 +218,10 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   std::vector<double>& cumulative = impl.cumulative_area;
   cumulative.resize(mesh.triangles.size() + 1);
   std::vector<double> box_area((mesh.triangles.size() + grain - 1) / grain, 0.0);
-  const std::vector<Index> repeated = repeated_triangles(mesh);
-  const std::size_t primitives = mesh.triangles.size() - repeated.size();
-  if (!repeated.empty()) {
-    impl.all_corners.resize(3 * mesh.triangles.size());
-    impl.triangle_of_primitive.reserve(primitives);
-    for (std::size_t f = 0, r = 0; f < mesh.triangles.size(); ++f) {
-      if (r < repeated.size() && repeated[r] == f) {
-        ++r;
-      } else {
-        impl.triangle_of_primitive.push_back(static_cast<Index>(f));
-      }
-    }
-  }
+  impl.triangle_of_primitive = first_copies(mesh);
+  const bool repeats = !impl.triangle_of_primitive.empty();
+  const std::size_t primitives = repeats ? impl.triangle_of_primitive.size() : mesh.triangles.size();
+  if (repeats) impl.all_corners.resize(3 * mesh.triangles.size());
   RTCGeometry geometry = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
   if (!geometry) throw_embree_error(impl, "creating a geometry");
   auto* positions = static_cast<float*>(rtcSetNewGeometryBuffer(
@@ -244,7 +235,7 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   const auto embree_scale = static_cast<float>(impl.embree_scale);
   for (std::size_t v = 0; v < vertex_count; ++v)
     for (int k = 0; k < 3; ++k) positions[3 * v + k] = mesh.positions[v][k] * embree_scale;
-  if (repeated.empty()) {
+  if (!repeats) {
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
       for (int k = 0; k < 3; ++k) corners[3 * f + k] = mesh.triangles[f][k];
     impl.corners = corners;
@@ -353,8 +344,6 @@ bool visit_triangle(RTCPointQueryFunctionArguments* args) {
   auto& query = *static_cast<PointQuery*>(args->userPtr);
   const DistanceIndex::Impl& index = *query.index;
   const Index* t = index.primitive_corners + 3 * std::size_t{args->primID};
-  const Index triangle = index.triangle_of_primitive.empty() ? static_cast<Index>(args->primID)
-                                                             : index.triangle_of_primitive[args->primID];
   const Vec3d a = index.vertex(t[0]), b = index.vertex(t[1]), c = index.vertex(t[2]);
   // Embree culls nodes, not the triangles of a leaf. The distance to the triangle's box is a lower bound that
   // rejects most of them for a fraction of the exact test; the relative slack keeps rounding from ever
@@ -366,7 +355,10 @@ bool visit_triangle(RTCPointQueryFunctionArguments* args) {
   const Vec3d point = closest_point_on_triangle(query.p, a, b, c);
   const double d2 = (point - query.p).squaredNorm();
   if (d2 > query.limit_squared) return false;
+  if (d2 > query.best.distance_squared) return false;
   // Ties go to the lower triangle id, so the reported point does not depend on the traversal order either.
+  const Index triangle = index.triangle_of_primitive.empty() ? static_cast<Index>(args->primID)
+                                                             : index.triangle_of_primitive[args->primID];
   if (d2 < query.best.distance_squared ||
       (d2 == query.best.distance_squared && triangle < query.best.triangle)) {
     query.best = {point, d2, triangle};

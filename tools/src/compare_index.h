@@ -27,7 +27,7 @@ struct DistanceIndex::Impl {
   // What the BVH holds: the same triangles, less exact repeats (see DistanceIndex's constructor), whose
   // ids then map back through `triangle_of_primitive`; `corners` is then `all_corners`.
   const Index* primitive_corners = nullptr;
-  std::vector<Index> triangle_of_primitive;  // empty when every triangle is a primitive
+  std::vector<Index> triangle_of_primitive;  // ascending; empty when every triangle is a primitive
   std::vector<Index> all_corners;
 
   std::vector<double> cumulative_area;     // triangle_count + 1 entries, from 0 to the total area
