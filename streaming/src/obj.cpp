@@ -607,16 +607,13 @@ char* print_index(char* out, Index i) {
 // reader asked to split corners, or the decimator, writes such copies); OBJ indexes positions apart from uvs
 // and normals, so the sides share one `v` line and each corner names its own `vt` and `vn`. The file is then
 // closed where the surface is, as the input was, rather than cut open along every seam. Copies whose uv and
-// normal are equal too are no seam but a crack the mesh has, and keep lines of their own. Without uvs or
-// normals every vertex keeps its own line.
+// normal are equal too are no seam but a crack the mesh has, and keep lines of their own. Empty without uvs
+// or normals, where every vertex keeps its own line.
 std::vector<Index> position_lines(const IndexedMesh& mesh, Index* lines) {
   const std::size_t n = mesh.positions.size();
+  *lines = static_cast<Index>(n);
+  if (!mesh.has_uvs() && !mesh.has_normals()) return {};
   std::vector<Index> line(n);
-  if (!mesh.has_uvs() && !mesh.has_normals()) {
-    for (std::size_t v = 0; v < n; ++v) line[v] = static_cast<Index>(v);
-    *lines = static_cast<Index>(n);
-    return line;
-  }
   struct Key {
     PositionKey position;
     Color color;
@@ -677,7 +674,7 @@ void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOpti
   const bool colors = mesh.has_colors(), uvs = mesh.has_uvs(), normals = mesh.has_normals();
   const bool shifted = mesh.origin != Vec3d::Zero();
   for (std::size_t i = 0, written = 0; i < mesh.positions.size(); ++i) {
-    if (line[i] != written) continue;  // a seam copy: its group's line is out
+    if (!line.empty() && line[i] != written) continue;  // a seam copy: its group's line is out
     ++written;
     char* const start = file.reserve(128);  // "v", 3 doubles and 3 floats with their separators, "\n"
     char* p = start;
@@ -728,7 +725,7 @@ void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOpti
     *p++ = 'f';
     for (Index v : mesh.triangles[f]) {
       *p++ = ' ';
-      p = print_index(p, line[v]);
+      p = print_index(p, line.empty() ? v : line[v]);
       if (uvs || normals) {
         *p++ = '/';
         if (uvs) p = print_index(p, v);
