@@ -2580,14 +2580,24 @@ struct Decimator {
                             : "");
       return;
     }
+    // A blocked pair whose cost exceeds the error bound would not be collapsed without its guard either: it
+    // counts as over the bound, so that a run stopped by the bound says so even where guards blocked others.
+    const bool bounded = opt.max_error < std::numeric_limits<double>::infinity();
+    auto over_bound = [&](Index e) {
+      decimate_detail::RawQuadric q;
+      Placement p;
+      float key = 0;
+      return bounded && evaluate_inline(e, &q, &p, &key, nullptr) == kIdleError;
+    };
     std::uint64_t flip = 0, topology = 0, locked_pairs = 0, over = 0, deferred_left = 0;
-    for (const Edge& edge : edges) {
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+      const Edge& edge = edges[e];
       switch (edge.slot) {
         case kBlockedFlip:
-          ++flip;
+          ++(over_bound(static_cast<Index>(e)) ? over : flip);
           break;
         case kBlockedTopology:
-          ++topology;
+          ++(over_bound(static_cast<Index>(e)) ? over : topology);
           break;
         case kIdleLocked:
           ++locked_pairs;
@@ -2620,11 +2630,17 @@ struct Decimator {
                      (kept_last_faces ? ", and the last faces are kept" : "");
       return;
     }
-    if (over > 0 && flip + topology + locked_pairs + deferred_left == 0) {
+    // With both criteria, the error bound is what stopped the run when candidates exceed it, as with the
+    // bound alone: guards blocking a few others within it do not make it a guard's stop.
+    if (over > 0) {
       stats.stop = DecimateStop::max_error;
       stats.target_reached = false;
+      const std::uint64_t guarded = flip + topology + locked_pairs + deferred_left;
       stats.reason =
-          prefix + "every remaining candidate (" + std::to_string(over) + ") exceeds the maximum error";
+          prefix + (guarded == 0
+                        ? "every remaining candidate (" + std::to_string(over) + ") exceeds the maximum error"
+                        : std::to_string(over) + " remaining candidates exceed the maximum error, " +
+                              std::to_string(guarded) + " are blocked by guards");
       return;
     }
     if (flip + topology + locked_pairs + deferred_left + over == 0) {

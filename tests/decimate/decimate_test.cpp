@@ -1001,6 +1001,28 @@ TEST(Decimate, MaxErrorIsHonoured) {
   EXPECT_FALSE(r.stats.target_reached);
 }
 
+// With a count target it never reaches, the error bound is the stop even where guards also block a few pairs
+// within it, as with the bound alone: the run reported "blocked" there, and blamed the guards for what the
+// bound did.
+TEST(Decimate, TheErrorBoundIsTheStopAlsoWhereGuardsBlockSomePairs) {
+  IndexedMesh sphere = test::sphere(5);
+  std::mt19937 random(3);
+  for (Vec3f& p : sphere.positions) p *= 1 + 0.03f * static_cast<float>(random() % 1000) / 1000.0f;
+  const double bound = 0.01;
+  DecimateOptions o = faces(4);
+  o.max_error = bound;
+  const DecimateResult r = run(sphere, o);
+  EXPECT_GT(r.mesh.face_count(), 4u);
+  EXPECT_LE(r.stats.max_error, bound);
+  EXPECT_EQ(r.stats.stop, DecimateStop::max_error) << r.stats.reason;
+  EXPECT_FALSE(r.stats.target_reached);
+  EXPECT_NE(r.stats.reason.find("exceed the maximum error"), std::string::npos) << r.stats.reason;
+  EXPECT_NE(r.stats.reason.find("blocked by guards"), std::string::npos) << r.stats.reason;
+  DecimateOptions alone;
+  alone.max_error = bound;
+  EXPECT_EQ(run(sphere, alone).stats.stop, DecimateStop::max_error);
+}
+
 // An error bound alone took every face: a unit square at --max-error 1 (its collapses cost 0.35) and a
 // single triangle without border planes (cost 0) both came out empty. So did a vertex target below three.
 TEST(Decimate, TheLastFaceIsNeverRemoved) {
