@@ -303,6 +303,57 @@ std::vector<Index> equal_position_targets(const std::vector<Vec3f>& positions) {
   return target;
 }
 
+// 1 at each face that repeats an earlier one: the same three corners in the same turn (any rotation), as a
+// part exported twice or a soup written with repeats leaves after welding. A repeat's copies stack on every
+// edge they share, which the collapses treat as a non-manifold sheet: a 10 x 10 grid with 50 of its faces
+// repeated went to one triangle written twice, half the square gone. Faces are grouped by their lowest
+// corner (a counting sort, 4 bytes a face and a vertex, freed before the decimator's own arrays grow), and
+// each group, two faces on average, compared within itself. Copies in the opposite turn stay: they are the
+// two sides of a sheet. Empty when there is no repeat (the common case allocates nothing more).
+std::vector<std::uint8_t> repeated_faces(const std::vector<Triangle>& triangles, std::size_t vertices) {
+  const std::size_t nf = triangles.size();
+  // The face turned to start at its lowest corner; kNone for a degenerate face (dropped on its own).
+  auto turned = [&](std::size_t f) {
+    const Triangle& t = triangles[f];
+    if (has_repeated_corner(t)) return Triangle{kNone, kNone, kNone};
+    const int low = t[0] < t[1] ? (t[0] < t[2] ? 0 : 2) : (t[1] < t[2] ? 1 : 2);
+    return Triangle{t[low], t[(low + 1) % 3], t[(low + 2) % 3]};
+  };
+  std::vector<Index> first(vertices + 1, 0);
+  for (std::size_t f = 0; f < nf; ++f) {
+    const Index low = turned(f)[0];
+    if (low != kNone) ++first[low + 1];
+  }
+  for (std::size_t v = 0; v < vertices; ++v) first[v + 1] += first[v];
+  std::vector<Index> by_low(first[vertices]);
+  {
+    std::vector<Index> at(first.begin(), first.end() - 1);
+    for (std::size_t f = 0; f < nf; ++f) {
+      const Index low = turned(f)[0];
+      if (low != kNone) by_low[at[low]++] = static_cast<Index>(f);
+    }
+  }
+  std::vector<std::uint8_t> repeat;
+  std::vector<std::pair<std::pair<Index, Index>, Index>> group;
+  for (std::size_t v = 0; v < vertices; ++v) {
+    const Index begin = first[v], end = first[v + 1];
+    if (end - begin < 2) continue;
+    // Faces in increasing index order within the group, so the earliest of equal ones is kept.
+    group.clear();
+    for (Index i = begin; i < end; ++i) {
+      const Triangle t = turned(by_low[i]);
+      group.push_back({{t[1], t[2]}, by_low[i]});
+    }
+    std::sort(group.begin(), group.end());
+    for (std::size_t i = 1; i < group.size(); ++i) {
+      if (group[i].first != group[i - 1].first) continue;
+      if (repeat.empty()) repeat.assign(nf, 0);
+      repeat[group[i].second] = 1;
+    }
+  }
+  return repeat;
+}
+
 // Sorts a short list in place (neighbour lists have a handful of entries).
 inline void small_sort(Index* first, Index* last) {
   if (last - first > 32) {
@@ -467,14 +518,21 @@ struct Decimator {
       }
     }
     if (opt.weld) weld(in);
+    const std::vector<std::uint8_t> repeat = repeated_faces(m.triangles, n);
     std::size_t kept = 0;
     for (std::size_t f = 0; f < m.triangles.size(); ++f) {
       const Triangle t = m.triangles[f];
-      if (has_repeated_corner(t)) continue;
+      if (has_repeated_corner(t)) {
+        ++stats.dropped_degenerate_faces;
+        continue;
+      }
+      if (!repeat.empty() && repeat[f]) {
+        ++stats.dropped_repeated_faces;
+        continue;
+      }
       if (storage.seams) storage.face_origin.push_back(static_cast<Index>(f));
       m.triangles[kept++] = t;
     }
-    stats.dropped_degenerate_faces = m.triangles.size() - kept;
     m.triangles.resize(kept);
     if (kept >= first_state / 3) throw Error("decimate: too many faces (" + std::to_string(kept) + ")");
   }
@@ -2711,6 +2769,13 @@ std::string separate_faces_note(const DecimateStats& stats, bool welded) {
          " vertices each belong to a single face, as in a triangle soup: such faces decimate as separate "
          "pieces, each removed whole, so the surface falls apart" +
          (welded ? "" : "; without --no-weld, vertices at equal positions are joined first");
+}
+
+std::string repeated_faces_note(const DecimateStats& stats) {
+  if (stats.dropped_repeated_faces == 0) return "";
+  return counted(stats.dropped_repeated_faces, "face") +
+         " repeated another face's corners in the same order and " +
+         (stats.dropped_repeated_faces == 1 ? "was" : "were") + " left out";
 }
 
 const char* stop_name(DecimateStop stop) {

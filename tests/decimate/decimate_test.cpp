@@ -227,11 +227,13 @@ TEST(Decimate, ExactVertexCounts) {
 TEST(Decimate, CountsNeverFallMoreThanParityAllows) {
   // When the only pairs left remove many faces or vertices at once, the count target is reported blocked
   // rather than passed: the last resort used to take any of them, which took ten copies of one triangle to
-  // no faces for a target of 3, and fifty separate triangles to 3 vertices for a target of 5.
+  // no faces for a target of 3, and fifty separate triangles to 3 vertices for a target of 5. Copies in the
+  // same turn are now left out as repeats, so the copies alternate turns: the two sides of one triangle are
+  // left, and every collapse takes both.
   IndexedMesh copies;
   copies.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
-  copies.triangles.assign(10, Triangle{0, 1, 2});
-  const DecimateResult few = run(copies, faces(3));
+  for (int c = 0; c < 10; ++c) copies.triangles.push_back(c % 2 == 0 ? Triangle{0, 1, 2} : Triangle{0, 2, 1});
+  const DecimateResult few = run(copies, faces(1));
   EXPECT_GE(few.mesh.face_count(), 2u);
   EXPECT_EQ(few.stats.stop, DecimateStop::blocked) << few.stats.reason;
   EXPECT_NE(few.stats.reason.find("overshoot"), std::string::npos) << few.stats.reason;
@@ -1458,6 +1460,47 @@ TEST(Decimate, RejectsBadInputWithAClearError) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("face 8"), std::string::npos) << e.what();
   }
+}
+
+// A face repeated in the same turn is left out; one in the opposite turn (the other side of a sheet) stays. A
+// 10 x 10 grid with half of its faces repeated went to one triangle written twice, half the square gone.
+TEST(Decimate, RepeatedFacesAreLeftOut) {
+  IndexedMesh mesh = test::grid_square(10);
+  const std::size_t distinct = mesh.face_count();
+  for (std::size_t f = 0; f < 50; ++f) {
+    const Triangle t = mesh.triangles[f];
+    mesh.triangles.push_back(f % 2 == 0 ? t : Triangle{t[1], t[2], t[0]});  // a rotation is the same turn
+  }
+  const DecimateResult r = run(mesh, faces(2));
+  EXPECT_EQ(r.stats.dropped_repeated_faces, 50u);
+  EXPECT_EQ(r.stats.input_faces, distinct);
+  ASSERT_EQ(r.mesh.face_count(), 2u);
+  // The whole square: its four corners, and the two faces' areas add up to 1.
+  ASSERT_EQ(r.mesh.vertex_count(), 4u);
+  for (const Vec3f& corner : {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0), Vec3f(1, 1, 0)}) {
+    float nearest = 1;
+    for (const Vec3f& p : r.mesh.positions) nearest = std::min(nearest, (p - corner).norm());
+    EXPECT_LT(nearest, 1e-6f) << corner.transpose();
+  }
+  double area = 0;
+  for (const Triangle& t : r.mesh.triangles) {
+    const Vec3f& a = r.mesh.positions[t[0]];
+    area += 0.5 * (r.mesh.positions[t[1]] - a).cross(r.mesh.positions[t[2]] - a).norm();
+  }
+  EXPECT_NEAR(area, 1.0, 1e-6);
+  EXPECT_NE(repeated_faces_note(r.stats).find("50 faces repeated"), std::string::npos);
+
+  // Opposite turns are not repeats; nor are faces that share only two corners.
+  IndexedMesh sheet = test::grid_square(4);
+  const std::size_t one_side = sheet.face_count();
+  for (std::size_t f = 0; f < one_side; ++f) {
+    const Triangle t = sheet.triangles[f];
+    sheet.triangles.push_back({t[0], t[2], t[1]});
+  }
+  const DecimateResult two_sided = run(sheet, faces(static_cast<std::uint64_t>(2 * one_side)));
+  EXPECT_EQ(two_sided.stats.dropped_repeated_faces, 0u);
+  EXPECT_EQ(two_sided.mesh.face_count(), 2 * one_side);
+  EXPECT_EQ(repeated_faces_note(two_sided.stats), "");
 }
 
 TEST(Decimate, EmptyAndTinyInputs) {

@@ -106,6 +106,7 @@ void add_decimate_command(CLI::App& app) {
     const auto decimate_start = std::chrono::steady_clock::now();
     DecimateResult result = decimate(std::move(input), options);
     const double decimate_seconds = seconds_since(decimate_start);
+    if (const std::string note = repeated_faces_note(result.stats); !note.empty()) console.warn(note);
     if (const std::string note = separate_faces_note(result.stats, options.weld); !note.empty())
       console.warn(note);
     const auto write_start = std::chrono::steady_clock::now();
@@ -126,7 +127,8 @@ void add_decimate_command(CLI::App& app) {
                          {"vertices_used", s.input_vertices},
                          {"welded_vertices", s.welded_vertices},
                          {"single_face_vertices", s.single_face_vertices},
-                         {"dropped_degenerate_faces", s.dropped_degenerate_faces}};
+                         {"dropped_degenerate_faces", s.dropped_degenerate_faces},
+                         {"dropped_repeated_faces", s.dropped_repeated_faces}};
       // vertices: the file's; positions: what the vertex target counts (a seam's copies of one count once).
       report["output"] = {{"file", flags->output},
                           {"vertices", result.mesh.vertex_count()},

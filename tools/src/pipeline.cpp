@@ -368,9 +368,11 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
 
 }  // namespace
 
-// A clustered intermediate is indexed whatever the input was, so only a soup decimated directly says it.
-void warn_separate_faces(const WarningFn& warn, bool weld, const DecimateStats& stats) {
+// A clustered intermediate is indexed whatever the input was, and has no repeated faces, so only an input
+// decimated directly says these.
+void warn_input_faces(const WarningFn& warn, bool weld, const DecimateStats& stats) {
   if (!warn) return;
+  if (const std::string note = repeated_faces_note(stats); !note.empty()) warn(note);
   if (const std::string note = separate_faces_note(stats, weld); !note.empty()) warn(note);
 }
 
@@ -408,7 +410,7 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   const std::uint64_t decimate_in = stage.mesh.mesh.face_count();
   DecimateResult decimated = decimate(std::move(stage.mesh), decimate_options);
   check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
-  warn_separate_faces(options.warn, options.decimate.weld, decimated.stats);
+  warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
   // The decimator kept its own collapses within the bound, but the intermediate it started from was
@@ -519,7 +521,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     const std::uint64_t faces_in = input.mesh.face_count();
     DecimateResult decimated = decimate(std::move(input), decimate_options);
     check_intermediate_reached(stage, levels[i], faces_in, decimated.stats);
-    if (i == 0) warn_separate_faces(options.warn, options.decimate.weld, decimated.stats);
+    if (i == 0) warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
 
     LodLevel level;
     level.target_faces = levels[i];

@@ -126,7 +126,7 @@ enum class DecimateStop {
 };
 
 struct DecimateStats {
-  std::uint64_t input_faces = 0;     // after removing faces with a repeated corner
+  std::uint64_t input_faces = 0;     // after removing faces with a repeated corner, and repeated faces
   std::uint64_t input_vertices = 0;  // vertices used by those faces (after welding)
   std::uint64_t faces = 0;           // reached
   std::uint64_t vertices = 0;        // reached
@@ -141,6 +141,8 @@ struct DecimateStats {
   // as some exporters write), whose faces decimate as separate pieces (see separate_faces_note).
   std::uint64_t single_face_vertices = 0;
   std::uint64_t dropped_degenerate_faces = 0;
+  // Faces dropped as repeats of an earlier face: the same corners in the same turn (after welding).
+  std::uint64_t dropped_repeated_faces = 0;
   // Rejections of the candidate at the top of the queue, over the whole run.
   std::uint64_t rejected_flip = 0;      // would flip, degenerate or double a surrounding triangle
   std::uint64_t rejected_topology = 0;  // would break the link condition (preserve_topology)
@@ -190,5 +192,9 @@ const char* stop_name(DecimateStop stop);
 // share no edge, so the decimator removes them whole and the result is scattered triangles, however small
 // its collapse costs; empty otherwise. `welded`: the run had DecimateOptions::weld.
 std::string separate_faces_note(const DecimateStats& stats, bool welded);
+
+// A warning for a run that left out faces repeating another (DecimateStats::dropped_repeated_faces); empty
+// when there were none.
+std::string repeated_faces_note(const DecimateStats& stats);
 
 }  // namespace ocsimp
