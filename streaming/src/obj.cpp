@@ -5,7 +5,7 @@
 //   2. (only with attributes) walk the faces to give each position the vt / vn of the first face corner that
 //      references it - OBJ indexes attributes separately, our meshes keep one of each per position, so
 //      positions shared across a uv seam keep the first corner's uv;
-//   3. stream the faces, fan-triangulating polygons.
+//   3. stream the faces, triangulating polygons (see polygon.h).
 // Passes 2 and 3 start at the first face statement, since everything before it was loaded already.
 // Negative indices count back from the records read so far at that line, as the format specifies.
 // Accepted and ignored: comments (whole lines, or from a '#' after a statement), o g s usemtl mtllib l p vp
@@ -29,6 +29,7 @@
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/atomic_file.h"
 #include "origin_sample.h"
+#include "polygon.h"
 #include "text_io.h"
 
 namespace ocsimp::detail {
@@ -121,7 +122,7 @@ class ObjStream final : public TriangleStream {
           if (!copies_.empty()) {
             for (Corner& c : corners_) c.v = corner_vertex(c);
           }
-          emit_fan(batch);
+          emit_triangles(batch);
           break;
         default:
           break;
@@ -409,17 +410,29 @@ class ObjStream final : public TriangleStream {
       fail("a face needs at least 3 corners (found " + std::to_string(corners_.size()) + ")");
   }
 
-  void emit_fan(TriangleBatch& batch) {
+  // The face's triangles: a polygon's are cut in its plane (see polygon.h), but for a fan where the
+  // positions went to a vertex sink instead of memory (the out-of-core path).
+  void emit_triangles(TriangleBatch& batch) {
     pending_.clear();
     pending_next_ = 0;
-    for (std::size_t i = 1; i + 1 < corners_.size(); ++i) {
-      const Triangle t{corners_[0].v, corners_[i].v, corners_[i + 1].v};
+    auto emit = [&](const Triangle& t) {
       if (batch.triangles.size() < capacity_) {
         batch.triangles.push_back(t);
       } else {
         pending_.push_back(t);
       }
+    };
+    polygon_.clear();
+    for (const Corner& c : corners_) polygon_.push_back(c.v);
+    if (vertex_sink_) {
+      for (std::size_t i = 1; i + 1 < polygon_.size(); ++i)
+        emit(Triangle{polygon_[0], polygon_[i], polygon_[i + 1]});
+      return;
     }
+    polygon_triangles(
+        polygon_.data(), polygon_.size(),
+        [&](std::size_t i) -> const Vec3f& { return vertices_.positions[polygon_[i]]; }, polygon_scratch_,
+        emit);
   }
 
   void flush_sink() {
@@ -592,7 +605,9 @@ class ObjStream final : public TriangleStream {
   };
   bool split_ = false;
   std::map<CopyKey, Index> copies_;
-  std::vector<Triangle> pending_;  // the rest of a polygon's fan that did not fit the last batch
+  std::vector<Triangle> pending_;  // the rest of a polygon's triangles that did not fit the last batch
+  std::vector<Index> polygon_;     // the face's vertices
+  PolygonScratch polygon_scratch_;
   std::size_t pending_next_ = 0;
 
   std::uint64_t pass_ = 1, passes_ = 2;

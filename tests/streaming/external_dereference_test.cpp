@@ -200,11 +200,13 @@ TEST(ExternalDereference, ObjWithPolygonsAttributesAndRelativeIndices) {
   const test::TempDir& dir = folders.dir;
   const std::string& work = folders.work;
   const std::string path = dir / "mixed.obj";
+  // The pentagon is convex: out of core its fan is all there is (the positions are on disk, not at hand to
+  // cut a concave polygon in its plane, as the in-memory reader does).
   std::ofstream(path) << "# quads, a pentagon, uvs, normals, negative indices, vertices after faces\n"
                          "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
                          "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
                          "v 2 0 0.5\nv 2 1 0.5\nv 3 0.5 1\n"
-                         "f -3 -2 -1 3 2\n"
+                         "f 2 -3 -1 -2 3\n"
                          "f 2//1 5//1 6//1\n"
                          "v 4 4 4\nf 8 7 6\n";
   expect_same_corners(path, 24);  // two vertices a partition

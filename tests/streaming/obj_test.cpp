@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -220,6 +221,75 @@ TEST(Obj, PolygonsAreFanTriangulated) {
   EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 1, 2}, {0, 2, 3}}));
 }
 
+// A concave polygon's fan covers ground outside it: an L's fan from its inner corner's neighbour reached over
+// the notch. Ear clipping keeps every triangle inside the outline, turning as the polygon does.
+TEST(Obj, ConcavePolygonsAreCutInsideTheirOutline) {
+  using Vec2d = Eigen::Vector2d;
+  // Outlines in the plane z = 0: an L, a comb with three notches, and the comb wound the other way.
+  const std::vector<std::vector<Vec2d>> outlines = {
+      {{2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}, {0, 0}},
+      {{0, 0}, {7, 0}, {7, 3}, {6, 3}, {6, 1}, {5, 1}, {5, 3}, {4, 3}, {4, 1}, {3, 1}, {3, 3}, {0, 3}},
+      {{0, 3}, {3, 3}, {3, 1}, {4, 1}, {4, 3}, {5, 3}, {5, 1}, {6, 1}, {6, 3}, {7, 3}, {7, 0}, {0, 0}},
+  };
+  auto signed_area = [](const std::vector<Vec2d>& q) {
+    double a = 0;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      const Vec2d& p = q[i];
+      const Vec2d& r = q[(i + 1) % q.size()];
+      a += p.x() * r.y() - r.x() * p.y();
+    }
+    return a / 2;
+  };
+  // Even-odd test for a point strictly inside.
+  auto inside = [](const std::vector<Vec2d>& q, const Vec2d& p) {
+    bool in = false;
+    for (std::size_t i = 0, j = q.size() - 1; i < q.size(); j = i++) {
+      if ((q[i].y() > p.y()) != (q[j].y() > p.y()) &&
+          p.x() < (q[j].x() - q[i].x()) * (p.y() - q[i].y()) / (q[j].y() - q[i].y()) + q[i].x())
+        in = !in;
+    }
+    return in;
+  };
+  // Each outline also tilted out of its plane, so the cut happens in a plane no axis is normal to.
+  const Eigen::Matrix3d tilt = (Eigen::AngleAxisd(0.7, Vec3d(1, 2, 0.5).normalized())).toRotationMatrix();
+  for (const auto& outline : outlines) {
+    for (bool tilted : {false, true}) {
+      std::string text;
+      for (const Vec2d& p : outline) {
+        const Vec3d q = tilted ? Vec3d(tilt * Vec3d(p.x(), p.y(), 0)) : Vec3d(p.x(), p.y(), 0);
+        char line[96];
+        std::snprintf(line, sizeof line, "v %.17g %.17g %.17g\n", q.x(), q.y(), q.z());
+        text += line;
+      }
+      text += "f";
+      for (std::size_t i = 1; i <= outline.size(); ++i) {
+        text += ' ';
+        text += std::to_string(i);
+      }
+      text += '\n';
+      TempDir dir;
+      const IndexedMesh m = read_text(dir, text);
+      ASSERT_EQ(m.face_count(), outline.size() - 2);
+      const double area = signed_area(outline);
+      double total = 0;
+      for (const Triangle& t : m.triangles) {
+        // Back in the outline's plane, from the file's corners.
+        const std::vector<Vec2d> corners = {outline[t[0]], outline[t[1]], outline[t[2]]};
+        const double a = signed_area(corners);
+        EXPECT_GT(a * area, 0) << "a triangle turns against its polygon";
+        total += a;
+        EXPECT_TRUE(inside(outline, (corners[0] + corners[1] + corners[2]) / 3)) << "a triangle outside";
+      }
+      EXPECT_NEAR(total, area, 1e-9) << "the triangles do not tile the polygon";
+    }
+  }
+  // A polygon that crosses itself has no proper cut; it still gives n - 2 triangles.
+  TempDir dir;
+  const IndexedMesh bow =
+      read_text(dir, "v 0 0 0\nv 2 2 0\nv 2 0 0\nv 0 2 0\nv 1 3 0\nv -1 1 0\nf 1 2 3 4 5 6\n");
+  EXPECT_EQ(bow.face_count(), 4u);
+}
+
 TEST(Obj, VerticesMayFollowTheFaces) {
   TempDir dir;
   const IndexedMesh m = read_text(dir, "f 1 2 3\nf 3 2 4\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n");
@@ -276,7 +346,8 @@ TEST(Obj, VertexColorsAndLenientNumbers) {
 TEST(Obj, StreamsBatchesOfBoundedSize) {
   TempDir dir;
   std::string text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv -1 0 -2\nv 0 3 0\n";
-  for (int i = 0; i < 10; ++i) text += "f 1 2 3 4 6\n";  // 3 triangles each
+  // A convex pentagon (a fan from its first corner, whose triangles all start at vertex 0): 3 triangles each.
+  for (int i = 0; i < 10; ++i) text += "f 1 2 3 6 4\n";
   test::write_file_bytes(dir / "p.obj", text);
   ReadOptions options;
   options.batch_capacity = 4;

@@ -18,7 +18,7 @@ namespace {
 constexpr const char* kReportFields = R"(Report (--report FILE.json), one object:
   command             "lod"
   input, output       the input path and the output pattern
-  input_faces         triangles read (polygons fan-triangulated)
+  input_faces         triangles read (polygons split into triangles)
   clustered, out_of_core, intermediate_faces, memory_limit_bytes, peak_rss_bytes, seconds   as in simplify
   max_error           the last (smallest) level's max_error
   levels              largest first: [{target_faces, faces, vertices, seam_copies, file, seconds, max_error,

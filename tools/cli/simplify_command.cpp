@@ -16,7 +16,7 @@ namespace {
 constexpr const char* kReportFields = R"(Report (--report FILE.json), one object:
   command             "simplify"
   input, output       the paths
-  input_faces         triangles read (polygons fan-triangulated)
+  input_faces         triangles read (polygons split into triangles)
   output_faces        faces written; output_vertices likewise (a texture seam's vertex once per side)
   output_seam_copies  vertices written beyond the first at a seam's position (see ocsimp decimate)
   clustered           whether the clustering stage ran (input over the in-core budget, or --two-stage)

@@ -1,0 +1,119 @@
+// Triangulation of a face of more than three corners (an OBJ or PLY polygon).
+//
+// A fan from the first corner is right only for a convex polygon: on a concave one (an L, a notched outline,
+// as modelling and CAD tools export) some fan triangles cover the outside and overlap the others. A polygon
+// convex in its own plane keeps its fan, so quads and convex n-gons read as they always did; a concave one is
+// cut by ear clipping in that plane. Hand-written: of the triangulators Debian packages, CGAL would bring a
+// large dependency into the readers for a few dozen lines, and Mapbox's earcut comes only as Python bindings.
+#pragma once
+
+#include <cmath>
+#include <cstddef>
+#include <vector>
+
+#include "ocsimp/core/mesh.h"
+
+namespace ocsimp::detail {
+
+// Above this many corners a concave polygon keeps its fan: ear clipping tests each candidate ear against the
+// polygon's reflex corners, which for a large outline with many of them is quadratic or worse.
+inline constexpr std::size_t kMaxClippedCorners = 4096;
+
+// Scratch of polygon_triangles, kept by a reader across faces so that it allocates once.
+struct PolygonScratch {
+  std::vector<double> x, y;
+  std::vector<std::size_t> prev, next;
+  std::vector<unsigned char> reflex;
+};
+
+// Appends the n - 2 triangles of polygon `corners` (n >= 3, in the file's order) to `out`, each turning as
+// the polygon does. `position(i)` gives corner i's position. A polygon without area, or too large to clip, is
+// fanned from its first corner.
+template <class Corner, class Position, class Emit>
+void polygon_triangles(const Corner* corners, std::size_t n, const Position& position, PolygonScratch& s,
+                       const Emit& emit) {
+  auto fan = [&] {
+    for (std::size_t i = 1; i + 1 < n; ++i) emit(Triangle{corners[0], corners[i], corners[i + 1]});
+  };
+  if (n <= 3 || n > kMaxClippedCorners) return fan();
+  // Newell's normal of the polygon; its largest axis is dropped to work in the plane.
+  double nx = 0, ny = 0, nz = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3f& a = position(i);
+    const Vec3f& b = position(i + 1 == n ? 0 : i + 1);
+    nx += (double(a.y()) - b.y()) * (double(a.z()) + b.z());
+    ny += (double(a.z()) - b.z()) * (double(a.x()) + b.x());
+    nz += (double(a.x()) - b.x()) * (double(a.y()) + b.y());
+  }
+  const double ax = std::abs(nx), ay = std::abs(ny), az = std::abs(nz);
+  if (!(ax + ay + az > 0)) return fan();
+  const int drop = ax >= ay && ax >= az ? 0 : ay >= az ? 1 : 2;
+  const double sign = (drop == 0 ? nx : drop == 1 ? ny : nz) > 0 ? 1.0 : -1.0;
+  s.x.resize(n);
+  s.y.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3f& p = position(i);
+    // (u, v) turning counterclockwise seen from the normal.
+    const double u = drop == 0 ? p.y() : drop == 1 ? p.z() : p.x();
+    const double v = drop == 0 ? p.z() : drop == 1 ? p.x() : p.y();
+    s.x[i] = u;
+    s.y[i] = sign * v;
+  }
+  auto turn = [&](std::size_t a, std::size_t b, std::size_t c) {
+    return (s.x[b] - s.x[a]) * (s.y[c] - s.y[a]) - (s.y[b] - s.y[a]) * (s.x[c] - s.x[a]);
+  };
+  s.reflex.assign(n, 0);
+  bool convex = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    s.reflex[i] = turn(i == 0 ? n - 1 : i - 1, i, i + 1 == n ? 0 : i + 1) < 0;
+    convex = convex && !s.reflex[i];
+  }
+  if (convex) return fan();
+
+  s.prev.resize(n);
+  s.next.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    s.prev[i] = i == 0 ? n - 1 : i - 1;
+    s.next[i] = i + 1 == n ? 0 : i + 1;
+  }
+  // Whether reflex corner r lies in triangle (a, b, c) or on its sides (a corner at the same place as one of
+  // the three does not count: a polygon that touches itself there is still clipped).
+  auto blocks = [&](std::size_t r, std::size_t a, std::size_t b, std::size_t c) {
+    auto same = [&](std::size_t i, std::size_t j) { return s.x[i] == s.x[j] && s.y[i] == s.y[j]; };
+    if (same(r, a) || same(r, b) || same(r, c)) return false;
+    return turn(a, b, r) >= 0 && turn(b, c, r) >= 0 && turn(c, a, r) >= 0;
+  };
+  auto is_ear = [&](std::size_t i) {
+    const std::size_t a = s.prev[i], c = s.next[i];
+    if (!(turn(a, i, c) > 0)) return false;
+    for (std::size_t r = s.next[c]; r != a; r = s.next[r]) {
+      if (s.reflex[r] && blocks(r, a, i, c)) return false;
+    }
+    return true;
+  };
+  std::size_t left = n, i = 0, tried = 0;
+  while (left > 3) {
+    if (tried == left) {
+      // No ear: the polygon crosses itself or has no area left. Cut the corner at i anyway, so the count of
+      // triangles stays n - 2 whatever the outline.
+      tried = 0;
+    } else if (!is_ear(i)) {
+      i = s.next[i];
+      ++tried;
+      continue;
+    }
+    const std::size_t a = s.prev[i], c = s.next[i];
+    emit(Triangle{corners[a], corners[i], corners[c]});
+    s.next[a] = c;
+    s.prev[c] = a;
+    --left;
+    // Clipping an ear can only make its neighbours convex.
+    s.reflex[a] = turn(s.prev[a], a, c) < 0;
+    s.reflex[c] = turn(a, c, s.next[c]) < 0;
+    i = a;
+    tried = 0;
+  }
+  emit(Triangle{corners[s.prev[i]], corners[i], corners[s.next[i]]});
+}
+
+}  // namespace ocsimp::detail
