@@ -44,6 +44,11 @@ std::size_t ByteReader::fill(std::size_t count) {
     cursor_ = 0;
     end_ = tail;
   }
+  // A record larger than the window (a vertex of a hundred thousand properties) grows it, but only to what
+  // the file still holds: a header's claim alone allocates nothing, and a record the file cuts short is
+  // reported as such by the caller.
+  if (count > buffer_.size() && count <= file_size_ - std::min(file_size_, window_offset_))
+    buffer_.resize(count);
   // The window is filled whole: read_at returns less only where the file ends.
   const std::size_t room = buffer_.size() - end_;
   const std::size_t n = read_at(window_offset_ + end_, buffer_.data() + end_, room);

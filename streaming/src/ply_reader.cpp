@@ -1013,8 +1013,10 @@ void PlyStream::load_fixed_vertices(const std::vector<std::size_t>& offsets) {
   while (done < vertex_count_) {
     const std::uint64_t left = vertex_count_ - done;
     std::size_t available = reader_.available();
+    // At least one whole record, however large (the reader's window grows to hold it).
     if (available < record)
-      available = reader_.fill(std::min<std::uint64_t>(reader_.capacity(), left * record));
+      available = reader_.fill(
+          std::min<std::uint64_t>(std::max<std::uint64_t>(reader_.capacity(), record), left * record));
     const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, available / record));
     if (n == 0) fail_truncated();  // cannot happen after the size check, unless the file shrank
     const char* data = reader_.data();

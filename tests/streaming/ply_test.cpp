@@ -1259,6 +1259,44 @@ TEST(PlyMalformed, AFileWithoutFacesReadsWhenFacesAreNotRequired) {
 
 // An end_header as the file's last line, without a line ending, ends an empty mesh (it was "the header ends
 // without an end_header line"); any other last line without one still ends a header that is cut short.
+// A vertex record larger than the reader's 1 MiB window was reported as the file ending inside it, complete
+// as the file was. The window grows to hold a record, but only as far as the file goes: one cut short inside
+// its second record still says so.
+TEST(PlyLayout, AVertexRecordLargerThanTheReadWindowReads) {
+  test::TempDir dir;
+  constexpr int kExtra = 140'000;  // doubles after x y z: a record of 1,120,012 bytes
+  std::string text =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\n";
+  for (int i = 0; i < kExtra; ++i) text += "property double p" + std::to_string(i) + "\n";
+  text += "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  const std::size_t header = text.size();
+  const float points[3][3] = {{0, 0, 0}, {1, 0, 0}, {0, 2, 0}};
+  for (const auto& p : points) {
+    text.append(reinterpret_cast<const char*>(p), sizeof p);
+    const std::vector<double> extra(kExtra, 0.5);
+    text.append(reinterpret_cast<const char*>(extra.data()), extra.size() * sizeof(double));
+  }
+  const std::uint8_t three = 3;
+  const std::int32_t corners[3] = {0, 1, 2};
+  text.append(reinterpret_cast<const char*>(&three), 1);
+  text.append(reinterpret_cast<const char*>(corners), sizeof corners);
+  write_bytes(dir / "wide.ply", text);
+  const IndexedMesh mesh = read_mesh(dir / "wide.ply");
+  ASSERT_EQ(mesh.vertex_count(), 3u);
+  EXPECT_EQ(mesh.positions[2], Vec3f(0, 2, 0));
+  EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{{0, 1, 2}}));
+
+  const std::size_t record = 12 + kExtra * sizeof(double);
+  write_bytes(dir / "cut.ply", text.substr(0, header + record + record / 2));
+  try {
+    read_mesh(dir / "cut.ply");
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.reason(), "the file ends in record 1 of element vertex (3 declared)");
+  }
+}
+
 TEST(PlyMalformed, AnEndHeaderWithoutALineEndingEndsAnEmptyFile) {
   test::TempDir dir;
   const std::string header =
