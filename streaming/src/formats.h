@@ -66,7 +66,7 @@ inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint
   if (uv_seam_vertices > 0) {
     note =
         vertices(uv_seam_vertices, "on texture seams (face corners giving different texture coordinates)") +
-        " first corner's, so the texture smears along those seams";
+        " first corner's in this command (convert, decimate, simplify and lod keep a vertex per side)";
   }
   if (hard_edge_vertices > 0) {
     note += (note.empty() ? "" : "; ") +

@@ -141,7 +141,8 @@ TEST(Obj, SaysHowManyVerticesItsCornersDisagreeOn) {
   EXPECT_EQ(
       told[0],
       "3 vertices on texture seams (face corners giving different texture coordinates) keep their first "
-      "corner's, so the texture smears along those seams; 1 vertex on hard edges (face corners giving "
+      "corner's in this command (convert, decimate, simplify and lod keep a vertex per side); 1 vertex on "
+      "hard edges (face corners giving "
       "different normals) keeps its first corner's normal");
   told.clear();
   test::write_file_bytes(dir / "agreeing.obj",

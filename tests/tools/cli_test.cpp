@@ -1109,7 +1109,8 @@ TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
   const std::string smears =
       "ocsimp: warning: " + obj +
       ": 1 vertex on texture seams (face corners giving different texture coordinates) "
-      "keeps its first corner's, so the texture smears along those seams\n";
+      "keeps its first corner's in this command (convert, decimate, simplify and lod keep a vertex per "
+      "side)\n";
   const std::vector<std::string> decimating = {"decimate -q " + obj + " -o " + (dir / "d.ply") + " --faces 1",
                                                "simplify -q " + obj + " -o " + (dir / "s.ply") + " --faces 1",
                                                "lod -q " + obj + " -o " + (dir / "l.ply") + " --faces 1"};
