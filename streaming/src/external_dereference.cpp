@@ -489,6 +489,7 @@ class DereferencedStream final : public TriangleStream {
   const std::string& path() const override { return path_; }
 
   bool out_of_core() const { return !inner_; }
+  std::uint64_t vertex_count() const { return vertex_count_; }
   std::size_t partitions() const { return partitions_; }
   // Every partition's region is read at once: their buffers share the budget.
   std::size_t buffer_bytes() const {
@@ -596,6 +597,11 @@ std::unique_ptr<TriangleStream> open_dereferenced_stream(const std::string& path
 bool dereferenced_out_of_core(const TriangleStream& stream) {
   const auto* dereferenced = dynamic_cast<const DereferencedStream*>(&stream);
   return dereferenced != nullptr && dereferenced->out_of_core();
+}
+
+std::uint64_t dereferenced_vertex_count(const TriangleStream& stream) {
+  if (!dereferenced_out_of_core(stream)) return 0;
+  return dynamic_cast<const DereferencedStream&>(stream).vertex_count();
 }
 
 std::uint64_t dereference_buffer_bytes(const TriangleStream& stream) {

@@ -93,6 +93,8 @@ void add_cluster_command(CLI::App& app) {
         effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit));
     std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);
     const bool out_of_core = dereferenced_out_of_core(*stream);
+    // Out of core the clustering sees corners, not the file's vertex array: the count comes from the stream.
+    const std::uint64_t file_vertices = dereferenced_vertex_count(*stream);
     if (!stream->attributes_left_out().empty())
       console.warn(attributes_left_out_warning(stream->attributes_left_out()));
     const double open_seconds = seconds_since(start);
@@ -115,7 +117,7 @@ void add_cluster_command(CLI::App& app) {
       nlohmann::json report;
       report["input"] = {{"file", flags->input},
                          {"bytes", input_bytes},
-                         {"vertices", stats.input_vertices},
+                         {"vertices", out_of_core ? file_vertices : stats.input_vertices},
                          {"faces", stats.input_triangles}};
       // Clusters no face uses are written only where the octree's vertex target counts them or no face is
       // left; otherwise they are left out, and saying so under "output" read as vertices of the file.

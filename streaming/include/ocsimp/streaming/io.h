@@ -73,6 +73,9 @@ std::unique_ptr<TriangleStream> open_triangle_stream(const std::string& path,
 std::uint64_t triangles_hint(const std::string& path);
 // Whether `stream` dereferences its faces on disk (opened past ReadOptions::memory_budget).
 bool dereferenced_out_of_core(const TriangleStream& stream);
+// The vertices of the file such a stream dereferences (its triangles arrive as corners, so its vertex array
+// is empty); 0 for any other stream.
+std::uint64_t dereferenced_vertex_count(const TriangleStream& stream);
 // The read buffers such a stream holds while it delivers its triangles (one per partition of the vertex
 // ids), in bytes; 0 for any other stream.
 std::uint64_t dereference_buffer_bytes(const TriangleStream& stream);
