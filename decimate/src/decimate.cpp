@@ -312,43 +312,49 @@ std::vector<Index> equal_position_targets(const std::vector<Vec3f>& positions) {
 // two sides of a sheet. Empty when there is no repeat (the common case allocates nothing more).
 std::vector<std::uint8_t> repeated_faces(const std::vector<Triangle>& triangles, std::size_t vertices) {
   const std::size_t nf = triangles.size();
-  // The face turned to start at its lowest corner; kNone for a degenerate face (dropped on its own).
-  auto turned = [&](std::size_t f) {
-    const Triangle& t = triangles[f];
-    if (has_repeated_corner(t)) return Triangle{kNone, kNone, kNone};
-    const int low = t[0] < t[1] ? (t[0] < t[2] ? 0 : 2) : (t[1] < t[2] ? 1 : 2);
-    return Triangle{t[low], t[(low + 1) % 3], t[(low + 2) % 3]};
+  auto lowest = [](const Triangle& t) { return std::min({t[0], t[1], t[2]}); };
+  // The two corners after the lowest one, in the face's turn.
+  auto rest = [](const Triangle& t, Index low) {
+    return t[0] == low ? std::pair(t[1], t[2]) : t[1] == low ? std::pair(t[2], t[0]) : std::pair(t[0], t[1]);
   };
-  std::vector<Index> first(vertices + 1, 0);
-  for (std::size_t f = 0; f < nf; ++f) {
-    const Index low = turned(f)[0];
-    if (low != kNone) ++first[low + 1];
+  // Counting sort of the faces by lowest corner: group v is by_low[first[v] .. first[v + 1]).
+  std::vector<Index> first(vertices + 2, 0);
+  for (const Triangle& t : triangles) {
+    if (!has_repeated_corner(t)) ++first[lowest(t) + 2];
   }
-  for (std::size_t v = 0; v < vertices; ++v) first[v + 1] += first[v];
-  std::vector<Index> by_low(first[vertices]);
-  {
-    std::vector<Index> at(first.begin(), first.end() - 1);
-    for (std::size_t f = 0; f < nf; ++f) {
-      const Index low = turned(f)[0];
-      if (low != kNone) by_low[at[low]++] = static_cast<Index>(f);
-    }
+  for (std::size_t v = 0; v < vertices; ++v) first[v + 2] += first[v + 1];
+  std::vector<Index> by_low(first[vertices + 1]);
+  for (std::size_t f = 0; f < nf; ++f) {
+    const Triangle& t = triangles[f];
+    if (!has_repeated_corner(t)) by_low[first[lowest(t) + 1]++] = static_cast<Index>(f);
   }
   std::vector<std::uint8_t> repeat;
-  std::vector<std::pair<std::pair<Index, Index>, Index>> group;
+  auto mark = [&](Index f) {
+    if (repeat.empty()) repeat.assign(nf, 0);
+    repeat[f] = 1;
+  };
+  std::vector<std::pair<std::pair<Index, Index>, Index>> large;
   for (std::size_t v = 0; v < vertices; ++v) {
     const Index begin = first[v], end = first[v + 1];
-    if (end - begin < 2) continue;
-    // Faces in increasing index order within the group, so the earliest of equal ones is kept.
-    group.clear();
-    for (Index i = begin; i < end; ++i) {
-      const Triangle t = turned(by_low[i]);
-      group.push_back({{t[1], t[2]}, by_low[i]});
+    const Index low = static_cast<Index>(v);
+    if (end - begin <= 8) {
+      // The faces of a group are in increasing index order, so the earliest of equal ones is kept.
+      for (Index i = begin + 1; i < end; ++i) {
+        const auto corners = rest(triangles[by_low[i]], low);
+        for (Index k = begin; k < i; ++k) {
+          if (rest(triangles[by_low[k]], low) == corners) {
+            mark(by_low[i]);
+            break;
+          }
+        }
+      }
+      continue;
     }
-    std::sort(group.begin(), group.end());
-    for (std::size_t i = 1; i < group.size(); ++i) {
-      if (group[i].first != group[i - 1].first) continue;
-      if (repeat.empty()) repeat.assign(nf, 0);
-      repeat[group[i].second] = 1;
+    large.clear();
+    for (Index i = begin; i < end; ++i) large.push_back({rest(triangles[by_low[i]], low), by_low[i]});
+    std::sort(large.begin(), large.end());
+    for (std::size_t i = 1; i < large.size(); ++i) {
+      if (large[i].first == large[i - 1].first) mark(large[i].second);
     }
   }
   return repeat;
