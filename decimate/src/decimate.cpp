@@ -811,6 +811,11 @@ struct Decimator {
       for (const auto& [id, f] : chunk_folds[c]) fold_list.emplace_back(id + base, f);
     }
     boundary_edges = boundary_list.size();
+    // Faces all of whose edges are border edges: they share no edge with another face.
+    if (boundary_list.size() >= 3) {
+      std::vector<std::uint8_t> open_sides(faces.size(), 0);
+      for (const auto& [e, f] : boundary_list) stats.separate_faces += ++open_sides[f] == 3;
+    }
   }
 
   // Two faces turned back on each other by more than 120 degrees, judged by their encoded input normals
@@ -2770,7 +2775,11 @@ std::uint64_t ratio_target(double ratio, std::uint64_t faces) {
 
 std::string separate_faces_note(const DecimateStats& stats, bool welded) {
   // Below a few faces, a mesh of separate triangles is likely meant (a test, a marker).
-  if (stats.input_faces < 4 || 2 * stats.single_face_vertices <= stats.input_vertices) return "";
+  // Both counts: a book's pages (faces on one shared edge) leave their tips on a single face each, but they
+  // are not separate.
+  if (stats.input_faces < 4 || 2 * stats.single_face_vertices <= stats.input_vertices ||
+      2 * stats.separate_faces <= stats.input_faces)
+    return "";
   return std::to_string(stats.single_face_vertices) + " of the " + std::to_string(stats.input_vertices) +
          " vertices each belong to a single face, as in a triangle soup: such faces decimate as separate "
          "pieces, each removed whole, so the surface falls apart" +

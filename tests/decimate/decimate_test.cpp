@@ -754,6 +754,14 @@ TEST(Decimate, WeldJoinsDuplicatedVertices) {
   // The stats tell the two apart, and so does the note the commands print.
   EXPECT_EQ(loose.stats.single_face_vertices, soup.vertex_count());
   EXPECT_EQ(welded.stats.single_face_vertices, 0u);
+  EXPECT_EQ(loose.stats.separate_faces, soup.face_count());
+  EXPECT_EQ(welded.stats.separate_faces, 0u);
+  // A book's pages leave each tip on a single face, but share their spine: not a soup, no note (it said
+  // "as in a triangle soup").
+  const DecimateResult pages = run(book(200, 1), faces(20));
+  EXPECT_GT(2 * pages.stats.single_face_vertices, pages.stats.input_vertices);
+  EXPECT_EQ(pages.stats.separate_faces, 0u);
+  EXPECT_EQ(separate_faces_note(pages.stats, true), "");
   EXPECT_EQ(separate_faces_note(welded.stats, true), "");
   EXPECT_EQ(separate_faces_note(run(sphere, o).stats, false), "");
   EXPECT_EQ(

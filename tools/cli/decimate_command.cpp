@@ -127,6 +127,7 @@ void add_decimate_command(CLI::App& app) {
                          {"vertices_used", s.input_vertices},
                          {"welded_vertices", s.welded_vertices},
                          {"single_face_vertices", s.single_face_vertices},
+                         {"separate_faces", s.separate_faces},
                          {"dropped_degenerate_faces", s.dropped_degenerate_faces},
                          {"dropped_repeated_faces", s.dropped_repeated_faces}};
       // vertices: the file's; positions: what the vertex target counts (a seam's copies of one count once).

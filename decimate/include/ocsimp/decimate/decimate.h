@@ -140,6 +140,7 @@ struct DecimateStats {
   // Vertices only one face uses: nearly all of them in a triangle soup (each face its own three vertices,
   // as some exporters write), whose faces decimate as separate pieces (see separate_faces_note).
   std::uint64_t single_face_vertices = 0;
+  std::uint64_t separate_faces = 0;  // faces that share no edge with another face
   std::uint64_t dropped_degenerate_faces = 0;
   // Faces dropped as repeats of an earlier face: the same corners in the same turn (after welding).
   std::uint64_t dropped_repeated_faces = 0;
