@@ -61,15 +61,7 @@ struct ProgressBar {
     line_open = false;
   }
 
-  // Unwound by an error, the half-drawn bar is wiped rather than ended, so the error's one line takes its
-  // place instead of following a bar stopped part way.
-  ~ProgressBar() {
-    if (line_open && std::uncaught_exceptions() > 0) {
-      std::fprintf(stderr, "\r%*s\r", 100, "");
-      line_open = false;
-    }
-    finish_line();
-  }
+  ~ProgressBar() { finish_line(); }
 
   // What the stages count (core/system.h leaves units to the phase): readers and the cluster pass report
   // bytes of input, the decimator collapses, writers faces.
