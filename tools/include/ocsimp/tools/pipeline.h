@@ -97,8 +97,9 @@ struct SimplifyResult {
   // The input's vertex attributes that the out-of-core reading left out, as a list ("normals and colors");
   // empty when the result carries all the input has.
   std::string attributes_left_out;
-  // The memory the clustering stage's plan is expected to take, in bytes, when that is over memory_limit
-  // (even the coarsest plan that reaches the target did not fit); 0 when the plan fit.
+  // The memory the chosen path is expected to take, in bytes, when that is over memory_limit: the
+  // clustering stage's plan (even the coarsest that reaches the target did not fit), or decimating in core
+  // where that goes over the limit by less than clustering would; 0 when the plan fit.
   std::uint64_t memory_needed = 0;
 };
 
