@@ -2786,6 +2786,15 @@ std::string separate_faces_note(const DecimateStats& stats, bool welded) {
          (welded ? "" : "; without --no-weld, vertices at equal positions are joined first");
 }
 
+std::string nothing_to_decimate_reason(const DecimateStats& stats, bool welded) {
+  if (stats.input_faces > 0 || stats.dropped_degenerate_faces == 0) return "";
+  const std::uint64_t n = stats.dropped_degenerate_faces;
+  return (n == 1 ? std::string("its one face has") : "all " + std::to_string(n) + " faces have") +
+         " a repeated corner" +
+         (welded && stats.welded_vertices > 0 ? " once vertices at equal positions are joined" : "") +
+         ": nothing is left to simplify";
+}
+
 std::string repeated_faces_note(const DecimateStats& stats) {
   if (stats.dropped_repeated_faces == 0) return "";
   return counted(stats.dropped_repeated_faces, "face") +

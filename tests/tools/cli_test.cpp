@@ -743,6 +743,27 @@ bool writes_in(pid_t pid, const std::string& folder) {
 
 // Past the shell's file-size limit a write fails, as when a disk fills: one error line and exit 2, and no
 // file left. The kernel's SIGXFSZ had killed the process without a word (exit 153), leaving its temporary.
+// Faces that all collapse to a repeated corner once equal positions are joined leave nothing to simplify:
+// the commands that decimate refuse the file in one line instead of writing an empty mesh as a result (they
+// wrote one, "reached 0 faces", exit 0).
+TEST(Cli, NothingLeftToSimplifyIsAnError) {
+  test::TempDir dir;
+  const std::string mesh = dir / "flat.obj";
+  std::ofstream(mesh) << "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\nv 2 1 1\nf 1 2 4\n";
+  for (const std::string& command : {"decimate -q " + mesh + " -o " + (dir / "d.ply") + " --faces 1",
+                                     "simplify -q " + mesh + " -o " + (dir / "s.ply") + " --faces 1",
+                                     "lod -q " + mesh + " -o " + (dir / "l_{faces}.ply") + " --faces 1"}) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << command;
+    EXPECT_EQ(r.err, "ocsimp: " + mesh +
+                         ": all 2 faces have a repeated corner once vertices at equal positions are joined: "
+                         "nothing is left to simplify\n")
+        << command;
+  }
+  EXPECT_EQ(names_in(dir.path),
+            (std::vector<std::string>{"flat.obj", "stderr.txt", "stdout.txt"}));  // and run()'s captures
+}
+
 TEST(Cli, AFileSizeLimitIsAWriteError) {
   test::TempDir dir;
   const std::string mesh = dir / "in.ply", out = dir / "out.ply";

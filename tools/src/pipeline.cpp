@@ -425,6 +425,9 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   const std::uint64_t decimate_in = stage.mesh.mesh.face_count();
   DecimateResult decimated = decimate(std::move(stage.mesh), decimate_options);
   check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
+  if (const std::string reason = nothing_to_decimate_reason(decimated.stats, options.decimate.weld);
+      !reason.empty())
+    throw Error(input_path, {}, reason);
   warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
@@ -536,7 +539,12 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     const std::uint64_t faces_in = input.mesh.face_count();
     DecimateResult decimated = decimate(std::move(input), decimate_options);
     check_intermediate_reached(stage, levels[i], faces_in, decimated.stats);
-    if (i == 0) warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
+    if (i == 0) {
+      if (const std::string reason = nothing_to_decimate_reason(decimated.stats, options.decimate.weld);
+          !reason.empty())
+        throw Error(input_path, {}, reason);
+      warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
+    }
 
     LodLevel level;
     level.target_faces = levels[i];

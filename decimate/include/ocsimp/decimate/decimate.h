@@ -194,6 +194,11 @@ const char* stop_name(DecimateStop stop);
 // its collapse costs; empty otherwise. `welded`: the run had DecimateOptions::weld.
 std::string separate_faces_note(const DecimateStats& stats, bool welded);
 
+// Why a run had nothing to decimate although it was given faces (every one has a repeated corner, once
+// vertices at equal positions are joined when `welded`), for the commands to refuse it with; empty
+// otherwise. The result is then an empty mesh, which no command writes as if it were a simplification.
+std::string nothing_to_decimate_reason(const DecimateStats& stats, bool welded);
+
 // A warning for a run that left out faces repeating another (DecimateStats::dropped_repeated_faces); empty
 // when there were none.
 std::string repeated_faces_note(const DecimateStats& stats);
