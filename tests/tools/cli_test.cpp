@@ -722,6 +722,12 @@ TEST(Cli, AReportThatWouldOverwriteAMeshIsRefused) {
           << command << ": left " << name;
     }
   }
+  // bench's two reports at one path: the CSV replaced the JSON, silently.
+  const CommandResult both =
+      run("bench " + mesh + " --ratios 0.5 --json " + (dir / "r.txt") + " --csv " + (dir / "r.txt"), dir);
+  EXPECT_EQ(both.exit_code, 2);
+  EXPECT_EQ(both.err, "ocsimp: " + (dir / "r.txt") + ": --json and --csv name the same file\n");
+  EXPECT_FALSE(std::filesystem::exists(dir / "r.txt"));
 }
 
 // Whether process `pid` holds a file open in `folder` (its output's temporary, named or not).

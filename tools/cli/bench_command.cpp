@@ -73,6 +73,9 @@ void add_bench_command(CLI::App& app) {
     for (const std::string* path : {&flags->json, &flags->csv}) {
       if (!path->empty()) check_report_destination(*path, {flags->input});
     }
+    // One would replace the other, silently.
+    if (!flags->json.empty() && !flags->csv.empty() && same_file(flags->json, flags->csv))
+      throw Error(flags->csv, {}, "--json and --csv name the same file");
     std::vector<BenchMethod> methods;
     for (const std::string& name : flags->methods) methods.push_back(parse_bench_method(name));
     if (methods.empty()) methods = available_bench_methods();
