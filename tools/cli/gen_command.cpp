@@ -9,9 +9,10 @@
 namespace ocsimp::cli {
 
 void add_gen_command(CLI::App& app) {
-  auto* cmd = app.add_subcommand("gen",
-                                 "Generate a scan-like mesh (closed blobby surface, multi-frequency "
-                                 "displacement, scanner noise) of any size, in constant memory");
+  auto* cmd = app.add_subcommand(
+      "gen",
+      "Generate a scan-like mesh (closed blobby surface, multi-frequency "
+      "displacement, scanner noise) of any size, in bounded memory (at most about 130 MB)");
   struct Flags {
     std::string output;
     GenerateOptions options;

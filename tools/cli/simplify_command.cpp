@@ -83,7 +83,7 @@ void add_simplify_command(CLI::App& app) {
       ->check(thread_count());
   cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)");
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
-  cmd->add_flag("-q,--quiet", flags->quiet, "Nothing but errors (no progress bars, no summary)");
+  cmd->add_flag("-q,--quiet", flags->quiet, "Only warnings and errors (no progress bars, no summary)");
   cmd->callback([flags] {
     SimplifyOptions options = flags->options;
     const auto limit = limit_threads(options.threads);
