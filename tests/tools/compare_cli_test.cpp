@@ -57,6 +57,28 @@ TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
     EXPECT_NE(table.out.find(row), std::string::npos) << row;
 }
 
+// An original that is a single point has no diagonal to take a share of: the percentages are n/a (null in
+// the JSON), not the 0 % they printed beside distances of 1.7.
+TEST(CompareCli, PercentagesOfAPointAreNotAvailable) {
+  test::TempDir dir;
+  std::ofstream(dir / "point.obj") << "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n";
+  std::ofstream(dir / "triangle.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  const std::string args = " --samples 100 " + (dir / "point.obj") + " " + (dir / "triangle.obj");
+  const test::CommandResult json = run_ocsimp("compare --json" + args, dir);
+  ASSERT_EQ(json.exit_code, 0) << json.err;
+  const nlohmann::json j = nlohmann::json::parse(json.out);
+  EXPECT_EQ(j["diagonal"].get<double>(), 0.0);
+  EXPECT_GT(j["hausdorff"].get<double>(), 1.0);
+  for (const nlohmann::json& part : {j, j["forward"], j["backward"]}) {
+    for (const char* field : {"hausdorff_percent", "mean_percent", "rms_percent"})
+      EXPECT_TRUE(part[field].is_null()) << field;
+  }
+  const test::CommandResult table = run_ocsimp("compare -q" + args, dir);
+  ASSERT_EQ(table.exit_code, 0) << table.err;
+  EXPECT_NE(table.out.find("n/a"), std::string::npos) << table.out;
+  EXPECT_EQ(table.out.find("0.0000%"), std::string::npos) << table.out;
+}
+
 TEST(CompareCli, HelpShowsDefaultsAndBadInputFailsWithOneLine) {
   test::TempDir dir;
   const test::CommandResult help = run_ocsimp("compare --help", dir);

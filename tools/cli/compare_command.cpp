@@ -10,21 +10,37 @@
 namespace ocsimp::cli {
 namespace {
 
+// A distance as a percentage of the original's diagonal, or null where the original is a point (no
+// diagonal to take a share of: it printed 0 % for distances of 1.7).
+nlohmann::json percent_json(const SurfaceDistance& all, double distance) {
+  return all.diagonal > 0 ? nlohmann::json(all.percent(distance)) : nlohmann::json(nullptr);
+}
+
+std::string percent_text(const SurfaceDistance& all, double distance) {
+  char text[32];
+  if (all.diagonal > 0)
+    std::snprintf(text, sizeof text, "%9.4f%%", all.percent(distance));
+  else
+    std::snprintf(text, sizeof text, "%10s", "n/a");
+  return text;
+}
+
 nlohmann::json one_sided_json(const OneSidedDistance& d, const SurfaceDistance& all) {
   return {{"hausdorff", d.hausdorff},
           {"mean", d.mean},
           {"rms", d.rms},
-          {"hausdorff_percent", all.percent(d.hausdorff)},
-          {"mean_percent", all.percent(d.mean)},
-          {"rms_percent", all.percent(d.rms)},
+          {"hausdorff_percent", percent_json(all, d.hausdorff)},
+          {"mean_percent", percent_json(all, d.mean)},
+          {"rms_percent", percent_json(all, d.rms)},
           {"samples", d.samples},
           {"vertex_samples", d.vertex_samples},
           {"farthest", {d.farthest.x(), d.farthest.y(), d.farthest.z()}}};
 }
 
 void print_row(const char* label, double hausdorff, double mean, double rms, const SurfaceDistance& all) {
-  std::printf("  %-10s %12.6g %9.4f%%  %12.6g %9.4f%%  %12.6g %9.4f%%\n", label, hausdorff,
-              all.percent(hausdorff), mean, all.percent(mean), rms, all.percent(rms));
+  std::printf("  %-10s %12.6g %s  %12.6g %s  %12.6g %s\n", label, hausdorff,
+              percent_text(all, hausdorff).c_str(), mean, percent_text(all, mean).c_str(), rms,
+              percent_text(all, rms).c_str());
 }
 
 }  // namespace
@@ -104,9 +120,9 @@ void add_compare_command(CLI::App& app) {
     out["hausdorff"] = d.hausdorff;
     out["mean"] = d.mean;
     out["rms"] = d.rms;
-    out["hausdorff_percent"] = d.percent(d.hausdorff);
-    out["mean_percent"] = d.percent(d.mean);
-    out["rms_percent"] = d.percent(d.rms);
+    out["hausdorff_percent"] = percent_json(d, d.hausdorff);
+    out["mean_percent"] = percent_json(d, d.mean);
+    out["rms_percent"] = percent_json(d, d.rms);
     out["forward"] = one_sided_json(d.forward, d);
     out["backward"] = one_sided_json(d.backward, d);
     if (!flags->report.empty()) {
