@@ -2643,10 +2643,14 @@ struct Decimator {
       const bool below = target_f > 0 && faces_alive < target_f && stats.input_faces > target_f &&
                          !(target_v > 0 && verts_alive <= target_v);
       stats.stop = below ? DecimateStop::parity : DecimateStop::target_reached;
+      // An input already within its target is left as it is, and says so.
+      const bool already = stats.collapses == 0 && ((target_f > 0 && stats.input_faces <= target_f) ||
+                                                    (target_v > 0 && stats.input_vertices <= target_v));
       stats.reason = "reached " + reached_text +
                      (below ? " (the face target " + std::to_string(target_f) +
                                   " is unreachable: no remaining collapse removes a single face)"
-                            : "");
+                      : already ? " (the input is already within the target: nothing was collapsed)"
+                                : "");
       return;
     }
     // A blocked pair whose cost exceeds the error bound would not be collapsed without its guard either: it

@@ -1519,6 +1519,8 @@ TEST(Decimate, EmptyAndTinyInputs) {
   const DecimateResult none = run(test::grid_square(1), faces(10));
   EXPECT_EQ(none.mesh.face_count(), 2u);
   EXPECT_EQ(none.stats.stop, DecimateStop::target_reached);
+  // It says why nothing changed (it said only "reached 2 faces").
+  EXPECT_NE(none.stats.reason.find("already within the target"), std::string::npos) << none.stats.reason;
 }
 
 }  // namespace
