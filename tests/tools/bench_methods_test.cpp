@@ -176,6 +176,12 @@ TEST(BenchMethods, TablesHaveARowPerMethodAndTarget) {
   for (const char* target : {"10 %", "2 %"}) {
     for (BenchMethod method : methods) EXPECT_EQ((seen[{target, bench_method_name(method)}]), 1) << target;
   }
+  // A label with a bar or a line break stays in its cell and its row (it split both).
+  std::vector<BenchResult> labelled(results.begin(), results.begin() + 1);
+  labelled[0].mesh = "a|b\nc";
+  const std::string one_row = bench_markdown_table(labelled);
+  EXPECT_EQ(std::count(one_row.begin(), one_row.end(), '\n'), 3);
+  EXPECT_NE(one_row.find("| a\\|b c |"), std::string::npos) << one_row;
 
   // CSV: a header and one line per result. JSON: one object per result with the numbers the plots read.
   std::istringstream csv(bench_csv(results));

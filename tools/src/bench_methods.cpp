@@ -366,7 +366,11 @@ std::string bench_markdown_table(const std::vector<BenchResult>& results) {
       "| mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag | peak MB |\n"
       "|---|---|---|---:|---:|---:|---:|---:|\n";
   for (const BenchResult& r : results) {
-    out += "| " + r.mesh + " | " + target_label(r) + " | " + bench_method_name(r.method) + " | " +
+    // A '|' in the caller's label would start a new cell; a line break, a new row.
+    std::string name;
+    for (char c : r.mesh)
+      name += c == '|' ? std::string("\\|") : c == '\n' || c == '\r' ? std::string(" ") : std::string(1, c);
+    out += "| " + name + " | " + target_label(r) + " | " + bench_method_name(r.method) + " | " +
            with_commas(r.faces) + " | " + seconds_text(r.seconds) + " | ";
     if (r.distance) {
       out += format("%.4f", r.distance->percent(r.distance->rms)) + " | " +
