@@ -39,6 +39,7 @@
 #include "ocsimp/core/error.h"
 #include "origin_sample.h"
 #include "ply_header.h"
+#include "polygon.h"
 
 namespace ocsimp::detail {
 namespace {
@@ -392,6 +393,7 @@ class PlyStream final : public TriangleStream {
   void read_face_values();
   void check_corner(std::int64_t index, std::uint64_t offset) const;
   void add_corner(std::int64_t index, std::uint64_t offset);
+  void emit_polygon();
   void load_wedge_uvs();
   void rewind_to_faces();
   template <class CountT, class IndexT, bool Swap>
@@ -473,7 +475,14 @@ class PlyStream final : public TriangleStream {
   bool in_list_ = false;
   std::int64_t first_corner_ = 0, previous_corner_ = 0;  // fan: first and previous corner
   std::uint64_t corners_seen_ = 0;                       // in this polygon or strip
-  std::int64_t strip_before_ = 0;                        // strips: the corner before previous_corner_
+  // A polygon of more than three corners, gathered whole when its positions are at hand and cut in its
+  // plane (see polygon.h); its triangles beyond the batch wait in `pending_` for the next one.
+  std::uint64_t polygon_size_ = 0;
+  std::vector<Index> polygon_;
+  PolygonScratch polygon_scratch_;
+  std::vector<Triangle> pending_;
+  std::size_t pending_next_ = 0;
+  std::int64_t strip_before_ = 0;  // strips: the corner before previous_corner_
   std::uint64_t triangles_emitted_ = 0;
   bool faces_done_ = false;
   // Bytes read by earlier passes beyond the present position (the faces read again after a pass over them).
@@ -1203,6 +1212,11 @@ bool PlyStream::next(TriangleBatch& batch) {
   batch.triangles.resize(capacity_);
   out_ = batch.triangles.data();
   filled_ = 0;
+  while (pending_next_ < pending_.size() && filled_ < capacity_) out_[filled_++] = pending_[pending_next_++];
+  if (pending_next_ == pending_.size()) {
+    pending_.clear();
+    pending_next_ = 0;
+  }
   const std::uint64_t count = header_.elements[face_element_].count;
   while (filled_ < capacity_) {
     if (!in_record_ && current_record_ == count) {
@@ -1263,6 +1277,9 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
       }
     }
     strip_before_ = previous_corner_;
+  } else if (polygon_size_ > 3 && !vertex_sink_) {
+    polygon_.push_back(static_cast<Index>(index));
+    if (polygon_.size() == polygon_size_) emit_polygon();
   } else if (corners_seen_ == 0) {
     first_corner_ = index;
   } else if (corners_seen_ >= 2) {
@@ -1274,8 +1291,23 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
   ++corners_seen_;
 }
 
+void PlyStream::emit_polygon() {
+  polygon_triangles(
+      polygon_.data(), polygon_.size(),
+      [&](std::size_t i) -> const Vec3f& { return vertices_.positions[polygon_[i]]; }, polygon_scratch_,
+      [&](const Triangle& t) {
+        if (filled_ < capacity_)
+          out_[filled_++] = t;
+        else
+          pending_.push_back(t);
+        ++triangles_emitted_;
+      });
+  polygon_.clear();
+}
+
 // The general path: one value at a time, any types, any other properties around the index list. Returns at
-// the end of the record or when the batch is full (each corner adds at most one triangle).
+// the end of the record or when the batch is full (each corner adds at most one triangle; a polygon gathered
+// whole adds its triangles at its last corner, and what the batch cannot take waits in `pending_`).
 void PlyStream::read_face_values() {
   const PlyElement& element = header_.elements[face_element_];
   if (!in_record_) {
@@ -1313,6 +1345,8 @@ void PlyStream::read_face_values() {
     }
     in_list_ = true;
     corners_seen_ = 0;
+    polygon_size_ = list_left_;
+    polygon_.clear();
   }
   end_record();
   in_record_ = false;

@@ -1,4 +1,4 @@
-// Triangulation of a face of more than three corners (an OBJ polygon).
+// Triangulation of a face of more than three corners (an OBJ or PLY polygon).
 //
 // A fan from the first corner is right only for a convex polygon: on a concave one (an L, a notched outline,
 // as modelling and CAD tools export) some fan triangles cover the outside and overlap the others. A polygon

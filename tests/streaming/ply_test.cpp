@@ -684,6 +684,48 @@ TEST(PlyTypes, AsciiToleratesBlankLinesAndExtraSpacesAndNoFinalNewline) {
 // ---- Layouts
 // ------------------------------------------------------------------------------------------------
 
+// A concave polygon is cut inside its outline, as an OBJ's is (its fan covered the notches), also when its
+// triangles do not fit the batch they start in.
+TEST(PlyLayout, ConcavePolygonsAreCutInsideTheirOutline) {
+  test::TempDir dir;
+  // A comb with three notches, 12 corners, in z = 0.
+  const std::vector<std::array<float, 2>> comb = {{0, 0}, {7, 0}, {7, 3}, {6, 3}, {6, 1}, {5, 1},
+                                                  {5, 3}, {4, 3}, {4, 1}, {3, 1}, {3, 3}, {0, 3}};
+  std::string text =
+      "ply\nformat ascii 1.0\nelement vertex 12\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n";
+  for (const auto& p : comb) text += std::to_string(p[0]) + " " + std::to_string(p[1]) + " 0\n";
+  text += "12 0 1 2 3 4 5 6 7 8 9 10 11\n3 0 1 11\n";
+  write_bytes(dir / "comb.ply", text);
+  const IndexedMesh mesh = read_mesh(dir / "comb.ply");
+  ASSERT_EQ(mesh.face_count(), 11u);
+  double area = 0;
+  for (std::size_t f = 0; f < 10; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    const Vec3f n =
+        (mesh.positions[t[1]] - mesh.positions[t[0]]).cross(mesh.positions[t[2]] - mesh.positions[t[0]]);
+    EXPECT_GT(n.z(), 0) << "a triangle turns against its polygon";
+    area += 0.5 * n.z();
+    // Inside: no centroid in a notch (x in (3, 4) or (5, 6), y above 1).
+    const Vec3f c = (mesh.positions[t[0]] + mesh.positions[t[1]] + mesh.positions[t[2]]) / 3;
+    const bool notch = c.y() > 1 && ((c.x() > 3 && c.x() < 4) || (c.x() > 5 && c.x() < 6));
+    EXPECT_FALSE(notch) << c.transpose();
+  }
+  EXPECT_NEAR(area, 7 * 3 - 2 * 2, 1e-5);
+  EXPECT_EQ(mesh.triangles[10], (Triangle{0, 1, 11}));
+  // In batches of 4, the polygon's 10 triangles span three of them: the same triangles, in the same order.
+  ReadOptions options;
+  options.batch_capacity = 4;
+  auto stream = open_triangle_stream(dir / "comb.ply", options);
+  std::vector<Triangle> streamed;
+  TriangleBatch batch;
+  while (stream->next(batch)) {
+    EXPECT_LE(batch.size(), 4u);
+    streamed.insert(streamed.end(), batch.triangles.begin(), batch.triangles.end());
+  }
+  EXPECT_EQ(streamed, mesh.triangles);
+}
+
 TEST(PlyLayout, PolygonsAreFanTriangulated) {
   test::TempDir dir;
   // A quad, a hexagon, a triangle: 2 + 4 + 1 triangles.

@@ -42,8 +42,8 @@ class TriangleStream {
   virtual ~TriangleStream() = default;
 
   // Clears `batch` and fills it with up to the stream's batch capacity of triangles (polygons arrive split:
-  // an OBJ's concave ones in core by ear clipping in their plane, the rest as a fan). Returns false, with an
-  // empty batch, once the input is exhausted. Throws Error on bad input.
+  // an OBJ's or PLY's concave ones in core by ear clipping in their plane, the rest as a fan). Returns false,
+  // with an empty batch, once the input is exhausted. Throws Error on bad input.
   virtual bool next(TriangleBatch& batch) = 0;
 
   // Indexed streams: the vertex array, loaded once before the first batch, as a mesh without triangles
