@@ -1,5 +1,6 @@
 // ocsimp compare: Metro-style distance between an original mesh and its simplification.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 
@@ -10,18 +11,15 @@
 namespace ocsimp::cli {
 namespace {
 
-// A distance as a percentage of the original's diagonal, or null where the original is a point (no
-// diagonal to take a share of: it printed 0 % for distances of 1.7).
-nlohmann::json percent_json(const SurfaceDistance& all, double distance) {
-  return all.diagonal > 0 ? nlohmann::json(all.percent(distance)) : nlohmann::json(nullptr);
-}
-
+// A percentage of the original's diagonal for the table; n/a where the original is a point (it printed 0 %
+// for distances of 1.7).
 std::string percent_text(const SurfaceDistance& all, double distance) {
+  const double percent = all.percent(distance);
   char text[32];
-  if (all.diagonal > 0)
-    std::snprintf(text, sizeof text, "%9.4f%%", all.percent(distance));
-  else
+  if (std::isnan(percent))
     std::snprintf(text, sizeof text, "%10s", "n/a");
+  else
+    std::snprintf(text, sizeof text, "%9.4f%%", percent);
   return text;
 }
 
@@ -29,9 +27,9 @@ nlohmann::json one_sided_json(const OneSidedDistance& d, const SurfaceDistance& 
   return {{"hausdorff", d.hausdorff},
           {"mean", d.mean},
           {"rms", d.rms},
-          {"hausdorff_percent", percent_json(all, d.hausdorff)},
-          {"mean_percent", percent_json(all, d.mean)},
-          {"rms_percent", percent_json(all, d.rms)},
+          {"hausdorff_percent", all.percent(d.hausdorff)},
+          {"mean_percent", all.percent(d.mean)},
+          {"rms_percent", all.percent(d.rms)},
           {"samples", d.samples},
           {"vertex_samples", d.vertex_samples},
           {"farthest", {d.farthest.x(), d.farthest.y(), d.farthest.z()}}};
@@ -120,9 +118,9 @@ void add_compare_command(CLI::App& app) {
     out["hausdorff"] = d.hausdorff;
     out["mean"] = d.mean;
     out["rms"] = d.rms;
-    out["hausdorff_percent"] = percent_json(d, d.hausdorff);
-    out["mean_percent"] = percent_json(d, d.mean);
-    out["rms_percent"] = percent_json(d, d.rms);
+    out["hausdorff_percent"] = d.percent(d.hausdorff);
+    out["mean_percent"] = d.percent(d.mean);
+    out["rms_percent"] = d.percent(d.rms);
     out["forward"] = one_sided_json(d.forward, d);
     out["backward"] = one_sided_json(d.backward, d);
     if (!flags->report.empty()) {

@@ -109,8 +109,11 @@ struct SurfaceDistance {
   double hausdorff = 0, mean = 0, rms = 0;  // symmetric, as defined at the top of this file
   double diagonal = 0;                      // of the original's bounding box
 
-  // `distance` as a percentage of the diagonal (0 when the diagonal is 0).
-  double percent(double distance) const { return diagonal > 0 ? 100.0 * distance / diagonal : 0.0; }
+  // `distance` as a percentage of the diagonal; NaN when the diagonal is 0 (the original is a point: there is
+  // no share to take, and 0 read as a perfect match). JSON writes it as null.
+  double percent(double distance) const {
+    return diagonal > 0 ? 100.0 * distance / diagonal : std::numeric_limits<double>::quiet_NaN();
+  }
 };
 
 // Distances from the surface of `from` to the surface of `to`. Throws Error when there is nothing to sample
