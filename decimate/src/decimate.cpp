@@ -309,7 +309,8 @@ std::vector<Index> equal_position_targets(const std::vector<Vec3f>& positions) {
 // repeated went to one triangle written twice, half the square gone. Faces are grouped by their lowest
 // corner (a counting sort, 4 bytes a face and a vertex, freed before the decimator's own arrays grow), and
 // each group, two faces on average, compared within itself. Copies in the opposite turn stay: they are the
-// two sides of a sheet. Empty when there is no repeat (the common case allocates nothing more).
+// two sides of a sheet. Empty when there is no repeat. Faces with a repeated corner are grouped too (the
+// caller drops them as degenerate first, so a repeat among them counts as that).
 std::vector<std::uint8_t> repeated_faces(const std::vector<Triangle>& triangles, std::size_t vertices) {
   const std::size_t nf = triangles.size();
   auto lowest = [](const Triangle& t) { return std::min({t[0], t[1], t[2]}); };
@@ -319,15 +320,10 @@ std::vector<std::uint8_t> repeated_faces(const std::vector<Triangle>& triangles,
   };
   // Counting sort of the faces by lowest corner: group v is by_low[first[v] .. first[v + 1]).
   std::vector<Index> first(vertices + 2, 0);
-  for (const Triangle& t : triangles) {
-    if (!has_repeated_corner(t)) ++first[lowest(t) + 2];
-  }
+  for (const Triangle& t : triangles) ++first[lowest(t) + 2];
   for (std::size_t v = 0; v < vertices; ++v) first[v + 2] += first[v + 1];
-  std::vector<Index> by_low(first[vertices + 1]);
-  for (std::size_t f = 0; f < nf; ++f) {
-    const Triangle& t = triangles[f];
-    if (!has_repeated_corner(t)) by_low[first[lowest(t) + 1]++] = static_cast<Index>(f);
-  }
+  std::vector<Index> by_low(nf);
+  for (std::size_t f = 0; f < nf; ++f) by_low[first[lowest(triangles[f]) + 1]++] = static_cast<Index>(f);
   std::vector<std::uint8_t> repeat;
   auto mark = [&](Index f) {
     if (repeat.empty()) repeat.assign(nf, 0);

@@ -424,11 +424,7 @@ class ObjStream final : public TriangleStream {
     };
     polygon_.clear();
     for (const Corner& c : corners_) polygon_.push_back(c.v);
-    if (vertex_sink_) {
-      for (std::size_t i = 1; i + 1 < polygon_.size(); ++i)
-        emit(Triangle{polygon_[0], polygon_[i], polygon_[i + 1]});
-      return;
-    }
+    if (vertex_sink_) return fan_triangles(polygon_.data(), polygon_.size(), emit);
     polygon_triangles(
         polygon_.data(), polygon_.size(),
         [&](std::size_t i) -> const Vec3f& { return vertices_.positions[polygon_[i]]; }, polygon_scratch_,

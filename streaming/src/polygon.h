@@ -26,15 +26,20 @@ struct PolygonScratch {
   std::vector<unsigned char> reflex;
 };
 
+// The fan of polygon `corners` from its first corner: its n - 2 triangles, right for a convex polygon, and
+// what a reader without the positions at hand can give.
+template <class Corner, class Emit>
+void fan_triangles(const Corner* corners, std::size_t n, const Emit& emit) {
+  for (std::size_t i = 1; i + 1 < n; ++i) emit(Triangle{corners[0], corners[i], corners[i + 1]});
+}
+
 // Appends the n - 2 triangles of polygon `corners` (n >= 3, in the file's order) to `out`, each turning as
 // the polygon does. `position(i)` gives corner i's position. A polygon without area, or too large to clip, is
 // fanned from its first corner.
 template <class Corner, class Position, class Emit>
 void polygon_triangles(const Corner* corners, std::size_t n, const Position& position, PolygonScratch& s,
                        const Emit& emit) {
-  auto fan = [&] {
-    for (std::size_t i = 1; i + 1 < n; ++i) emit(Triangle{corners[0], corners[i], corners[i + 1]});
-  };
+  auto fan = [&] { fan_triangles(corners, n, emit); };
   if (n <= 3 || n > kMaxClippedCorners) return fan();
   // Newell's normal of the polygon; its largest axis is dropped to work in the plane.
   double nx = 0, ny = 0, nz = 0;
