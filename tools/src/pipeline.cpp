@@ -383,9 +383,12 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
 
 }  // namespace
 
-// A clustered intermediate is indexed whatever the input was, and has no repeated faces, so only an input
-// decimated directly says these.
-void warn_input_faces(const WarningFn& warn, bool weld, const DecimateStats& stats) {
+// A clustered intermediate is indexed whatever the input was, and has no repeated or degenerate faces, so
+// only an input decimated directly is refused for having no face left, or warned about its faces.
+void check_input_faces(const std::string& path, const WarningFn& warn, bool weld,
+                       const DecimateStats& stats) {
+  if (const std::string reason = nothing_to_decimate_reason(stats, weld); !reason.empty())
+    throw Error(path, {}, reason);
   if (!warn) return;
   if (const std::string note = repeated_faces_note(stats); !note.empty()) warn(note);
   if (const std::string note = separate_faces_note(stats, weld); !note.empty()) warn(note);
@@ -425,10 +428,7 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   const std::uint64_t decimate_in = stage.mesh.mesh.face_count();
   DecimateResult decimated = decimate(std::move(stage.mesh), decimate_options);
   check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
-  if (const std::string reason = nothing_to_decimate_reason(decimated.stats, options.decimate.weld);
-      !reason.empty())
-    throw Error(input_path, {}, reason);
-  warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
+  check_input_faces(input_path, options.warn, options.decimate.weld, decimated.stats);
   result.mesh = std::move(decimated.mesh);
   result.decimate = decimated.stats;
   // The decimator kept its own collapses within the bound, but the intermediate it started from was
@@ -539,12 +539,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     const std::uint64_t faces_in = input.mesh.face_count();
     DecimateResult decimated = decimate(std::move(input), decimate_options);
     check_intermediate_reached(stage, levels[i], faces_in, decimated.stats);
-    if (i == 0) {
-      if (const std::string reason = nothing_to_decimate_reason(decimated.stats, options.decimate.weld);
-          !reason.empty())
-        throw Error(input_path, {}, reason);
-      warn_input_faces(options.warn, options.decimate.weld, decimated.stats);
-    }
+    if (i == 0) check_input_faces(input_path, options.warn, options.decimate.weld, decimated.stats);
 
     LodLevel level;
     level.target_faces = levels[i];
