@@ -106,11 +106,7 @@ void add_decimate_command(CLI::App& app) {
     const auto decimate_start = std::chrono::steady_clock::now();
     DecimateResult result = decimate(std::move(input), options);
     const double decimate_seconds = seconds_since(decimate_start);
-    if (const std::string reason = nothing_to_decimate_reason(result.stats, options.weld); !reason.empty())
-      throw Error(flags->input, {}, reason);
-    if (const std::string note = repeated_faces_note(result.stats); !note.empty()) console.warn(note);
-    if (const std::string note = separate_faces_note(result.stats, options.weld); !note.empty())
-      console.warn(note);
+    check_input_faces(flags->input, console.warn, options.weld, result.stats);
     const auto write_start = std::chrono::steady_clock::now();
     WriteOptions write;
     write.ascii = flags->ascii;

@@ -383,8 +383,8 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
 
 }  // namespace
 
-// A clustered intermediate is indexed whatever the input was, and has no repeated or degenerate faces, so
-// only an input decimated directly is refused for having no face left, or warned about its faces.
+// Called for inputs only: a clustered intermediate is indexed whatever the input was, and has no repeated or
+// degenerate faces.
 void check_input_faces(const std::string& path, const WarningFn& warn, bool weld,
                        const DecimateStats& stats) {
   if (const std::string reason = nothing_to_decimate_reason(stats, weld); !reason.empty())

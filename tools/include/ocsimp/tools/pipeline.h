@@ -66,6 +66,11 @@ struct SimplifyOptions {
 // (TriangleStream::attributes_left_out), and why.
 std::string attributes_left_out_warning(const std::string& left_out);
 
+// After decimating the input read from `path` directly (not a clustered intermediate): throws an Error naming
+// the file when no face was left to decimate (nothing_to_decimate_reason), and tells `warn` of the repeated
+// faces left out and of a soup's separate faces.
+void check_input_faces(const std::string& path, const WarningFn& warn, bool weld, const DecimateStats& stats);
+
 // The memory budget in force for `memory_limit` (0: a third of physical memory).
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit);
 
