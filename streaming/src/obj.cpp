@@ -422,6 +422,7 @@ class ObjStream final : public TriangleStream {
         pending_.push_back(t);
       }
     };
+    if (corners_.size() == 3) return emit(Triangle{corners_[0].v, corners_[1].v, corners_[2].v});
     polygon_.clear();
     for (const Corner& c : corners_) polygon_.push_back(c.v);
     if (vertex_sink_) return fan_triangles(polygon_.data(), polygon_.size(), emit);
