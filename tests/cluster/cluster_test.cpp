@@ -1123,6 +1123,41 @@ TEST(Cluster, DropsCollapsedAndRepeatedTriangles) {
   EXPECT_EQ(topology.duplicate_faces, 0u);
 }
 
+// A sheet with a patch that the input also shows in the opposite turn (a two-sided decal on it, or the two
+// sides of a thin part closer than a cell): the patch's clustered faces are seen in both turns and the cells'
+// order says nothing of which to keep. Each takes the turn of the faces around it, so the output has the
+// faces of the sheet alone, each in the same turn: in the cells' order 33 to 122 edges were crossed twice
+// the same way.
+TEST(Cluster, FacesSeenInBothTurnsFollowTheirNeighbours) {
+  IndexedMesh sheet = test::grid_square(48);
+  for (Vec3f& p : sheet.positions) p.z() = 0.05f * std::sin(4 * p.x()) * std::cos(3 * p.y());
+  sheet = tilted(std::move(sheet));
+  IndexedMesh patched = sheet;
+  for (const Triangle& t : sheet.triangles) {
+    const Vec3f centroid = (sheet.positions[t[0]] + sheet.positions[t[1]] + sheet.positions[t[2]]) / 3;
+    if ((centroid - sheet.positions[sheet.vertex_count() / 2]).norm() < 0.3f)
+      patched.triangles.push_back({t[0], t[2], t[1]});
+  }
+  ASSERT_GT(patched.face_count(), sheet.face_count() + 1000);
+  // Each face as its corners from the lowest, so that equal faces in equal turns compare equal.
+  auto turns = [](const IndexedMesh& mesh) {
+    std::vector<Triangle> out;
+    for (Triangle t : mesh.triangles) {
+      std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+      out.push_back(t);
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  for (std::uint32_t grid : {8u, 11u, 16u}) {
+    const QuadricMesh alone = run(sheet, grid_options(grid)), out = run(patched, grid_options(grid));
+    ASSERT_GT(out.mesh.face_count(), 50u) << grid;
+    EXPECT_EQ(analyze_topology(alone.mesh).inconsistent_edges, 0u) << grid;
+    EXPECT_EQ(analyze_topology(out.mesh).inconsistent_edges, 0u) << grid;
+    EXPECT_EQ(turns(out.mesh), turns(alone.mesh)) << grid;
+  }
+}
+
 // A cell whose every triangle collapsed (a corner of an open sheet, with both its triangles reaching into
 // one neighbour) used to be written as a vertex no face uses.
 TEST(Cluster, NoOutputVertexIsLeftWithoutAFace) {
