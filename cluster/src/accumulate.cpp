@@ -1053,6 +1053,10 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
       stream.path(), positions, [&] { return static_cast<double>(positions.size()); }, bounds, options,
       cells.grid);
   const Grid grid = cells.grid;
+  if (options.accept_fine_cells && !options.accept_fine_cells(codes.size())) {
+    cells.declined_cells = codes.size();
+    return cells;
+  }
   check_cell_count(codes.size());
   const std::size_t count = codes.size();
   cells.keys.resize(count);

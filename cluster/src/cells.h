@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <functional>
 #include <new>
 #include <utility>
 #include <vector>
@@ -122,6 +123,9 @@ struct FineCells {
   // during the pass, counted on the grid each triangle was read on.
   std::uint64_t surviving_instances = 0;
 
+  // accept_fine_cells refused this many cells: nothing else is filled in.
+  std::uint64_t declined_cells = 0;
+
   std::size_t size() const { return keys.size(); }
   bool has_border() const { return !border.empty(); }
 };
@@ -138,6 +142,8 @@ struct PassOptions {
   // The fewest occupied cells that can reach the target (its vertex count, or half its face count): an
   // indexed input's grid is refined until it has that many, or every vertex has a cell of its own.
   std::uint64_t needed_cells = 0;
+  // Indexed input: asked with the chosen grid's occupied cells before any face is read (see ClusterOptions).
+  std::function<bool(std::uint64_t)> accept_fine_cells;
 };
 
 // The single pass over the stream.

@@ -371,6 +371,7 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
   pass.boundary = options.preserve_boundary;
   pass.threads = threads;
   pass.progress = options.progress;
+  pass.accept_fine_cells = options.accept_fine_cells;
   const bool targeted = options.octree || options.target_faces > 0;
   if (targeted) {
     const double vertices = options.octree && options.target_vertices > 0
@@ -394,6 +395,11 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
   }
 
   FineCells cells = accumulate(stream, pass);
+  if (cells.declined_cells > 0) {
+    stats.declined = true;
+    stats.fine_cells = cells.declined_cells;
+    return {};
+  }
   drop_untouched(cells);
   stats.input_vertices = cells.input_vertices;
   stats.input_triangles = cells.input_triangles;

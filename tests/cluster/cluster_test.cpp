@@ -1158,6 +1158,34 @@ TEST(Cluster, FacesSeenInBothTurnsFollowTheirNeighbours) {
   }
 }
 
+// The pipeline asks the pass for its fine cells before it reads a face, and may then read the stream whole
+// instead: a refusal must leave the stream as it was.
+TEST(Cluster, ARefusedGridLeavesTheStreamWhole) {
+  const IndexedMesh mesh = tilted(test::sphere(4));
+  ClusterOptions options = octree_options(200);
+  std::uint64_t offered = 0;
+  options.accept_fine_cells = [&](std::uint64_t cells) {
+    offered = cells;
+    return false;
+  };
+  auto stream = make_mesh_stream(mesh, false, 100);
+  ClusterStats stats;
+  const QuadricMesh refused = cluster(*stream, options, &stats);
+  EXPECT_TRUE(stats.declined);
+  EXPECT_GE(offered, 200u);
+  EXPECT_EQ(stats.fine_cells, offered);
+  EXPECT_EQ(refused.mesh.face_count(), 0u);
+  const IndexedMesh read = read_mesh(*stream);
+  EXPECT_EQ(read.positions, mesh.positions);
+  EXPECT_EQ(read.triangles, mesh.triangles);
+  // Accepted, the same cells are clustered.
+  options.accept_fine_cells = [&](std::uint64_t cells) { return cells == offered; };
+  ClusterStats accepted;
+  EXPECT_EQ(run(mesh, options, &accepted).mesh.vertex_count(), 200u);
+  EXPECT_FALSE(accepted.declined);
+  EXPECT_EQ(accepted.fine_cells, offered);
+}
+
 // A cell whose every triangle collapsed (a corner of an open sheet, with both its triangles reaching into
 // one neighbour) used to be written as a vertex no face uses.
 TEST(Cluster, NoOutputVertexIsLeftWithoutAFace) {

@@ -245,14 +245,16 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const double in_core_peak = process_bytes + in_core_bytes;
   const bool may_decimate_directly = (!options.two_stage || whole_input) && !stage.out_of_core;
   const bool in_core = may_decimate_directly && (in_core_bytes <= budget || in_core_peak < expected_peak);
-  if (in_core) {
+  // Reads the whole input for the decimator; `cluster_peak`: what clustering first was expected to take.
+  auto read_whole = [&](double cluster_peak) {
+    stage.memory_needed = 0;
     if (in_core_bytes > budget) {
       stage.memory_needed = static_cast<std::uint64_t>(in_core_peak);
       if (options.warn) {
         options.warn("decimating in core is expected to take about " + format_bytes(stage.memory_needed) +
                      ", over the memory limit of " + format_bytes(stage.memory_limit) +
                      ", which clustering first would exceed further (about " +
-                     format_bytes(static_cast<std::uint64_t>(expected_peak)) + ")");
+                     format_bytes(static_cast<std::uint64_t>(cluster_peak)) + ")");
       }
     }
     start = Clock::now();
@@ -263,6 +265,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
         {"read", seconds_since(start), stage.input_faces, stage.input_faces, peak_rss_bytes()});
     stage.target_faces = options.target_faces;
     stage.target_ratio = options.target_ratio;
+  };
+  if (in_core) {
+    read_whole(expected_peak);
     return stage;
   }
   // Clustering knows no seams: a cell on one averages both sides' texture coordinates.
@@ -284,13 +289,35 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   stage.intermediate_given = options.intermediate > 0;
   cluster_options.fine_cells_per_target =
       fine_cells / (static_cast<double>(cluster_options.target_faces) / 2);
-  if (expected_peak > budget) {
-    stage.memory_needed = static_cast<std::uint64_t>(expected_peak);
+  auto warn_over = [&](double peak) {
+    stage.memory_needed = static_cast<std::uint64_t>(peak);
     if (options.warn) {
       options.warn("clustering to the target is expected to take about " + format_bytes(stage.memory_needed) +
                    ", over the memory limit of " + format_bytes(stage.memory_limit) +
                    " (a larger memory limit or a smaller target keeps within it)");
     }
+  };
+  // An indexed pass counts its fine cells before it reads a face, and the count can be well off the plan:
+  // the level that holds the cells the target needs can have up to about 4 times as many (a surface's cells
+  // grow 4x a level). 2 M triangles to 500 k faces under 260 MB planned 375 k cells, got 782 k and peaked at
+  // 466 MiB, where decimating in core takes about 300. So the pass says what it got, and the estimate is
+  // made again from it: over the limit, and over what decimating in core takes, the stream is read whole
+  // instead (the pass has then read no face); over the limit only, the warning gives the new estimate.
+  double declined_peak = 0;
+  if (soup) {
+    if (expected_peak > budget) warn_over(expected_peak);
+  } else {
+    cluster_options.accept_fine_cells = [&](std::uint64_t cells) {
+      const double count = static_cast<double>(cells);
+      const double peak = process_bytes + std::max(vertex_bytes + count * pass_bytes, count * cell_bytes);
+      if (peak <= budget) return true;
+      if (may_decimate_directly && in_core_peak < peak) {
+        declined_peak = peak;
+        return false;
+      }
+      warn_over(peak);
+      return true;
+    };
   }
   // The capped fine grid above is the point, so the pass refines it only where it could not even give the
   // decimator its final target (far-apart parts, a far stray point): then the intermediate came out empty.
@@ -302,6 +329,10 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   cluster_options.progress = options.progress;
   start = Clock::now();
   stage.mesh = cluster(*stream, cluster_options, &stage.cluster);
+  if (stage.cluster.declined) {
+    read_whole(declined_peak);
+    return stage;
+  }
   // The in-memory path's reader refuses such a file; the streaming one only knows once the pass is done.
   if (stage.cluster.input_triangles == 0) throw Error(stream->path(), {}, "the mesh has no faces");
   stream.reset();

@@ -34,6 +34,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "ocsimp/core/mesh.h"
@@ -117,6 +118,13 @@ struct ClusterOptions {
 
   unsigned threads = 0;  // 0: all cores. The output does not depend on it.
 
+  // Indexed input: called once the pass has picked its fine grid, before it reads a face, with that grid's
+  // occupied cells, which the rest of the run's memory grows with (a target-driven grid's level can hold up
+  // to about 4 times the cells planned). Returning false ends cluster() there, with an empty mesh and
+  // ClusterStats::declined set; it has then read no face and left the stream's vertex array as it was, so
+  // the stream can still be read whole (the pipeline then decimates in core, where that takes less memory).
+  std::function<bool(std::uint64_t fine_cells)> accept_fine_cells;
+
   // Phases "cluster: vertices" (vertices), "cluster: faces" (bytes of input), "cluster: merge" (merges),
   // "cluster: place" (cells).
   ProgressFn progress;
@@ -144,6 +152,7 @@ struct ClusterStats {
   std::uint32_t output_grid = 0;
   double output_cell_size = 0;
   bool target_met = true;            // false when a vertex/face target could not be reached
+  bool declined = false;             // accept_fine_cells returned false: nothing was clustered
   double seconds = 0;                // wall time of cluster()
   std::uint64_t peak_rss_bytes = 0;  // of the process, when cluster() returned
 };
