@@ -158,12 +158,20 @@ AtomicFile::~AtomicFile() {
   }
 }
 
+void AtomicFile::check_open() const {
+  if (committed_)
+    throw Error(path_, {}, "the file is already complete (committed): nothing more can be written");
+  if (fd_ < 0) throw Error(path_, {}, "the file was closed by an earlier failure");
+}
+
 char* AtomicFile::reserve(std::size_t size) {
+  check_open();
   if (used_ + size > buffer_.size()) flush();
   return buffer_.data() + used_;
 }
 
 void AtomicFile::write(const void* data, std::size_t size) {
+  check_open();
   const char* bytes = static_cast<const char*>(data);
   if (used_ + size > buffer_.size()) flush();
   if (size >= buffer_.size()) {
@@ -195,6 +203,7 @@ void AtomicFile::flush() {
 }
 
 void AtomicFile::commit() {
+  check_open();
   flush();
   if (direct_) {
     const int fd = fd_;

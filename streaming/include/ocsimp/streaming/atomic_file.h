@@ -33,11 +33,13 @@ class AtomicFile {
   void advance(std::size_t size) { used_ += size; }
   std::uint64_t bytes_written() const { return flushed_ + used_; }
   void commit();
+  // write(), reserve() and commit() after a commit, or after a failure closed the file, throw Error.
 
   const std::string& path() const { return path_; }
   static constexpr std::size_t buffer_capacity = 1 << 20;
 
  private:
+  void check_open() const;
   void flush();
   void give_name();
 
