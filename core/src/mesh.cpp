@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <limits>
 #include <numeric>
+#include <string>
+
+#include "ocsimp/core/error.h"
 
 namespace ocsimp {
 
@@ -26,7 +29,29 @@ Vec3d far_origin(std::vector<Vec3d> first) {
   return largest > kFarFromOrigin && largest <= std::numeric_limits<float>::max() ? median : Vec3d::Zero();
 }
 
+void check_indices(const IndexedMesh& mesh, const std::string& who) {
+  const std::size_t n = mesh.positions.size();
+  auto check_size = [&](std::size_t size, const char* what) {
+    if (size != 0 && size != n) {
+      throw Error(who + what + " has " + std::to_string(size) + " entries for " + std::to_string(n) +
+                  " vertices");
+    }
+  };
+  check_size(mesh.normals.size(), "the normal array");
+  check_size(mesh.colors.size(), "the color array");
+  check_size(mesh.uvs.size(), "the uv array");
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+    for (Index v : mesh.triangles[f]) {
+      if (v >= n) {
+        throw Error(who + "face " + std::to_string(f) + " uses vertex " + std::to_string(v) +
+                    " but the mesh has " + std::to_string(n) + " vertices");
+      }
+    }
+  }
+}
+
 std::vector<Quadric> face_quadrics_per_vertex(const IndexedMesh& mesh) {
+  check_indices(mesh, "face quadrics: ");
   std::vector<Quadric> quadrics(mesh.positions.size());
   for (const Triangle& t : mesh.triangles) {
     const Quadric q =
@@ -59,6 +84,7 @@ struct DisjointSets {
 }  // namespace
 
 MeshTopology analyze_topology(const IndexedMesh& mesh) {
+  check_indices(mesh, "topology: ");
   MeshTopology topo;
   const std::size_t n = mesh.positions.size();
 

@@ -488,16 +488,19 @@ struct Decimator {
     IndexedMesh& m = in.mesh;
     const std::size_t n = m.positions.size();
     if (n >= first_state) throw Error("decimate: too many vertices (" + std::to_string(n) + ")");
-    auto check_size = [n](std::size_t size, const char* what) {
-      if (size != 0 && size != n) {
-        throw Error(std::string("decimate: ") + what + " has " + std::to_string(size) + " entries for " +
-                    std::to_string(n) + " vertices");
+    check_indices(m, "decimate: ");
+    if (!in.quadrics.empty() && in.quadrics.size() != n) {
+      throw Error("decimate: the quadric array has " + std::to_string(in.quadrics.size()) + " entries for " +
+                  std::to_string(n) + " vertices");
+    }
+    // A NaN there made every cost it touched NaN, and the error bound and the reported error 0.
+    for (std::size_t v = 0; v < in.quadrics.size(); ++v) {
+      const Quadric& q = in.quadrics[v];
+      for (double x : {q.a00, q.a01, q.a02, q.a11, q.a12, q.a22, q.b0, q.b1, q.b2, q.c}) {
+        if (!std::isfinite(x))
+          throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite quadric");
       }
-    };
-    check_size(m.normals.size(), "the normal array");
-    check_size(m.colors.size(), "the color array");
-    check_size(m.uvs.size(), "the uv array");
-    check_size(in.quadrics.size(), "the quadric array");
+    }
     for (std::size_t v = 0; v < n; ++v) {
       if (!m.positions[v].allFinite())
         throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite coordinate");
@@ -510,14 +513,6 @@ struct Decimator {
     for (std::size_t v = 0; v < m.uvs.size(); ++v) {
       if (!m.uvs[v].allFinite())
         throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite texture coordinate");
-    }
-    for (std::size_t f = 0; f < m.triangles.size(); ++f) {
-      for (Index v : m.triangles[f]) {
-        if (v >= n) {
-          throw Error("decimate: face " + std::to_string(f) + " uses vertex " + std::to_string(v) +
-                      " but the mesh has " + std::to_string(n) + " vertices");
-        }
-      }
     }
     if (opt.weld) weld(in);
     const std::vector<std::uint8_t> repeat = repeated_faces(m.triangles, n);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 
+#include "ocsimp/core/error.h"
+
 namespace ocsimp {
 namespace {
 
@@ -64,6 +66,8 @@ class MeshStream final : public TriangleStream {
 }  // namespace
 
 std::unique_ptr<TriangleStream> make_mesh_stream(IndexedMesh mesh, bool as_soup, std::size_t batch_capacity) {
+  // Every reader checks its file's indices; the stream's consumers index the arrays without checking.
+  check_indices(mesh, "in-memory mesh: ");
   return std::make_unique<MeshStream>(std::move(mesh), as_soup, batch_capacity);
 }
 

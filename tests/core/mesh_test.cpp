@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "ocsimp/core/error.h"
 #include "test_support.h"
 
 namespace ocsimp {
@@ -64,6 +65,26 @@ TEST(Mesh, CubeHelperIsClosedAndOutward) {
               6.0;
   }
   EXPECT_NEAR(volume, 1.0, 1e-6);
+}
+
+// Code that indexes a mesh's arrays by its faces checks them first: a corner past the vertex array or a
+// short attribute array read out of bounds (a segmentation fault from a corner of 0x7fffffff).
+TEST(Mesh, IndicesPastTheArraysAreAnError) {
+  IndexedMesh far_corner = test::grid_square(2);
+  far_corner.triangles.push_back({0, 1, 0x7fffffff});
+  IndexedMesh short_normals = test::grid_square(2);
+  short_normals.normals.assign(3, Vec3f(0, 0, 1));
+  for (const IndexedMesh* bad : {&far_corner, &short_normals}) {
+    EXPECT_THROW(check_indices(*bad, "test: "), Error);
+    EXPECT_THROW(face_quadrics_per_vertex(*bad), Error);
+    EXPECT_THROW(analyze_topology(*bad), Error);
+  }
+  try {
+    check_indices(far_corner, "test: ");
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), "test: face 8 uses vertex 2147483647 but the mesh has 9 vertices");
+  }
+  EXPECT_NO_THROW(check_indices(test::grid_square(2), "test: "));
 }
 
 TEST(Mesh, FaceQuadricsVanishOnTheSurface) {

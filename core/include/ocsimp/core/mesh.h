@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <string>
 #include <vector>
 
 #include "ocsimp/core/quadric.h"
@@ -60,7 +61,12 @@ struct QuadricMesh {
   std::vector<Quadric> quadrics;
 };
 
-// Area-weighted plane quadrics of the faces, summed at their corners.
+// Throws Error, its reason starting with `who` (as "decimate: "), unless every attribute array is empty or
+// has one entry a vertex and every face corner is in the vertex array: what any code that indexes the
+// arrays by the faces needs. Values are not looked at.
+void check_indices(const IndexedMesh& mesh, const std::string& who);
+
+// Area-weighted plane quadrics of the faces, summed at their corners. Throws Error as check_indices.
 std::vector<Quadric> face_quadrics_per_vertex(const IndexedMesh& mesh);
 
 // Connectivity facts for `ocsimp info` and for tests that assert manifoldness.
@@ -75,6 +81,7 @@ struct MeshTopology {
   std::size_t unreferenced_vertices = 0;
   std::size_t non_manifold_vertices = 0;  // faces around the vertex form more than one fan
 };
+// Throws Error as check_indices.
 MeshTopology analyze_topology(const IndexedMesh& mesh);
 
 }  // namespace ocsimp
