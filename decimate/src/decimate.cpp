@@ -54,6 +54,7 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <memory>
 #include <numeric>
@@ -2764,6 +2765,12 @@ struct Decimator {
 }  // namespace
 
 std::uint64_t ratio_target(double ratio, std::uint64_t faces) {
+  // A cast of a NaN, a negative or an out-of-range product to an integer is undefined.
+  if (!(ratio > 0 && ratio <= 1)) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%g", ratio);
+    throw Error(std::string("a ratio must be in (0, 1], not ") + text);
+  }
   return std::max<std::uint64_t>(
       1, static_cast<std::uint64_t>(std::llround(ratio * static_cast<double>(faces))));
 }

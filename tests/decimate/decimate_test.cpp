@@ -1441,6 +1441,17 @@ TEST(Decimate, SurvivesArbitrarySoups) {
   }
 }
 
+// Outside (0, 1] the product was cast to an integer unchecked: -1 of 101 faces gave 2^64 - 101, NaN 2^63.
+TEST(Decimate, RatioTargetsRoundAndRejectBadRatios) {
+  EXPECT_EQ(ratio_target(0.1, 69'451), 6'945u);
+  EXPECT_EQ(ratio_target(0.005, 69'451), 347u);
+  EXPECT_EQ(ratio_target(1e-9, 100), 1u);  // never 0
+  EXPECT_EQ(ratio_target(1.0, 101), 101u);
+  for (double bad : {0.0, -1.0, 1.5, 1e300, std::numeric_limits<double>::quiet_NaN(),
+                     std::numeric_limits<double>::infinity()})
+    EXPECT_THROW(ratio_target(bad, 101), Error) << bad;
+}
+
 TEST(Decimate, RejectsBadInputWithAClearError) {
   IndexedMesh bad = test::grid_square(2);
   bad.triangles.push_back({0, 1, 99});

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "ocsimp/core/error.h"
+#include "ocsimp/decimate/decimate.h"
 #include "ocsimp/streaming/io.h"
 #include "ocsimp/tools/generate.h"
 #include "test_support.h"
@@ -60,14 +61,6 @@ TEST(BenchMethods, NamesRoundTripAndUnknownNamesAreRejected) {
   if (!bench_has_meshoptimizer()) {
     EXPECT_THROW(parse_bench_method("meshopt"), Error);
   }
-}
-
-TEST(BenchMethods, TargetFromRatioRoundsAndRejectsBadRatios) {
-  EXPECT_EQ(target_from_ratio(0.1, 69'451), 6'945u);
-  EXPECT_EQ(target_from_ratio(0.005, 69'451), 347u);
-  EXPECT_EQ(target_from_ratio(1e-9, 100), 1u);  // never 0
-  EXPECT_THROW(target_from_ratio(0.0, 100), Error);
-  EXPECT_THROW(target_from_ratio(1.5, 100), Error);
 }
 
 TEST(BenchMethods, EveryMethodReachesWhatItPromises) {
@@ -145,7 +138,7 @@ TEST(BenchMethods, TablesHaveARowPerMethodAndTarget) {
   const std::vector<BenchMethod> methods = available_bench_methods();
   const std::vector<double> ratios = {0.1, 0.02};
   std::vector<std::uint64_t> targets;
-  for (double ratio : ratios) targets.push_back(target_from_ratio(ratio, input.mesh.face_count()));
+  for (double ratio : ratios) targets.push_back(ratio_target(ratio, input.mesh.face_count()));
   std::size_t reported = 0;
   BenchOptions options = quick_options();
   options.on_result = [&](const BenchResult&) { ++reported; };

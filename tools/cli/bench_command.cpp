@@ -6,6 +6,7 @@
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
+#include "ocsimp/decimate/decimate.h"
 #include "ocsimp/streaming/atomic_file.h"
 #include "ocsimp/streaming/io.h"
 #include "ocsimp/tools/bench_methods.h"
@@ -87,7 +88,7 @@ void add_bench_command(CLI::App& app) {
     if (input.mesh.face_count() == 0) throw Error(flags->input, {}, "the mesh has no faces to simplify");
 
     std::vector<std::uint64_t> targets = flags->faces;
-    for (double ratio : flags->ratios) targets.push_back(target_from_ratio(ratio, input.mesh.face_count()));
+    for (double ratio : flags->ratios) targets.push_back(ratio_target(ratio, input.mesh.face_count()));
 
     BenchOptions options = flags->options;
     if (!flags->quiet) {

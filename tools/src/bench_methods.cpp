@@ -308,11 +308,6 @@ BenchMethod parse_bench_method(std::string_view name) {
   throw Error("bench: unknown method '" + std::string(name) + "' (this build has " + known + ")");
 }
 
-std::uint64_t target_from_ratio(double ratio, std::uint64_t faces) {
-  if (!(ratio > 0 && ratio <= 1)) throw Error("bench: a ratio must be in (0, 1], not " + format("%g", ratio));
-  return ratio_target(ratio, faces);
-}
-
 BenchResult run_bench_method(const BenchInput& input, const DistanceIndex& original, BenchMethod method,
                              std::uint64_t target_faces, double target_ratio, const BenchOptions& options) {
   if (target_faces == 0) throw Error("bench: a face target must be at least 1");

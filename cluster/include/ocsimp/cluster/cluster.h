@@ -37,6 +37,7 @@
 #include <functional>
 #include <string>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
 #include "ocsimp/streaming/triangle_stream.h"

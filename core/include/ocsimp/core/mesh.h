@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/quadric.h"
 #include "ocsimp/core/types.h"
 

@@ -6,6 +6,8 @@
 #include <string>
 #include <string_view>
 
+#include "ocsimp/core/error.h"
+
 namespace ocsimp {
 
 // The memory this process can have: the machine's physical memory, or less where its control group (a

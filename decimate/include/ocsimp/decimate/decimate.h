@@ -29,6 +29,7 @@
 #include <string>
 #include <vector>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
 
@@ -184,7 +185,8 @@ struct DecimateResult {
 DecimateResult decimate(QuadricMesh input, const DecimateOptions& options);
 
 // The face target a ratio gives of `faces` faces, as DecimateOptions::target_ratio takes it: round(ratio *
-// faces), at least 1. For callers that resolve a ratio themselves (a chain of levels, a clustering plan).
+// faces), at least 1. For callers that resolve a ratio themselves (a chain of levels, a clustering plan, a
+// benchmark's targets). Throws Error for a ratio outside (0, 1].
 std::uint64_t ratio_target(double ratio, std::uint64_t faces);
 
 const char* stop_name(DecimateStop stop);

@@ -10,6 +10,7 @@
 #include <span>
 #include <string>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
 #include "ocsimp/streaming/triangle_stream.h"

@@ -5,6 +5,7 @@
 #include <memory>
 #include <string>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/streaming/triangle_stream.h"
 

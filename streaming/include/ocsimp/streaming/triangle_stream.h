@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/types.h"
 

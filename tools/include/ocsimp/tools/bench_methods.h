@@ -4,7 +4,7 @@
 // what run_bench() returns; bench/run_bench.sh drives it over the shared meshes.
 //
 //   ocsimp::BenchInput input{"bunny", "bunny.ply", ocsimp::read_mesh("bunny.ply")};
-//   const std::uint64_t target = ocsimp::target_from_ratio(0.1, input.mesh.face_count());
+//   const std::uint64_t target = ocsimp::ratio_target(0.1, input.mesh.face_count());
 //   std::vector<ocsimp::BenchResult> rows =
 //       ocsimp::run_bench(input, ocsimp::available_bench_methods(), {target}, {0.1}, ocsimp::BenchOptions{});
 //   std::fputs(ocsimp::bench_markdown_table(rows).c_str(), stdout);
@@ -34,6 +34,7 @@
 #include <string_view>
 #include <vector>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
 #include "ocsimp/tools/compare.h"
@@ -91,9 +92,6 @@ struct BenchOptions {
   // Called after each result is complete (for a running log).
   std::function<void(const BenchResult&)> on_result;
 };
-
-// A face target from a ratio of the input's faces: round(ratio * faces), at least 1.
-std::uint64_t target_from_ratio(double ratio, std::uint64_t faces);
 
 // Runs one method on one mesh at one target `repeat` times and measures the result against `original`
 // (the input mesh's DistanceIndex). `target_ratio` only labels the row. Throws Error for a target of 0, a

@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
 #include "ocsimp/core/types.h"

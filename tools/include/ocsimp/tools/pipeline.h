@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "ocsimp/cluster/cluster.h"
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
 #include "ocsimp/core/system.h"
 #include "ocsimp/decimate/decimate.h"
