@@ -784,6 +784,21 @@ TEST(Cli, AFileSizeLimitIsAWriteError) {
   EXPECT_EQ(names_in(dir.path), (std::vector<std::string>{"in.ply", "stderr.txt"}));
 }
 
+// What info --json, compare and bench print went nowhere, with exit 0, when standard output was a full disk
+// or closed.
+TEST(Cli, AFailedWriteToStandardOutputIsAnError) {
+  test::TempDir dir;
+  const std::string mesh = dir / "square.ply", err = dir / "stderr.txt";
+  write_mesh(mesh, test::grid_square(4));
+  for (const std::string to : {">/dev/full", ">&-"}) {
+    const int status = std::system((kOcsimp + " info --json " + mesh + " " + to + " 2>" + err).c_str());
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 2) << to;
+    EXPECT_EQ(file_bytes(err).rfind("ocsimp: standard output: write failed: ", 0), 0u) << file_bytes(err);
+    EXPECT_EQ(lines(file_bytes(err)), 1u) << file_bytes(err);
+  }
+}
+
 // Killed while it writes, by a signal it can catch or by SIGKILL (as the out-of-memory killer does), gen
 // leaves the folder as it was: its output is an unnamed file until it is complete.
 TEST(Cli, InterruptedGenLeavesNoFile) {
