@@ -784,6 +784,28 @@ TEST(Cli, AFileSizeLimitIsAWriteError) {
   EXPECT_EQ(names_in(dir.path), (std::vector<std::string>{"in.ply", "stderr.txt"}));
 }
 
+// decimate, simplify, cluster and convert wrote over their input when asked to (lod already refused): a
+// simplified mesh in place of the scan it came from.
+TEST(Cli, AnOutputThatWouldReplaceItsInputIsRefused) {
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply";
+  write_mesh(mesh, test::sphere(3));
+  std::filesystem::create_directories(dir / "sub");
+  const std::string before = file_bytes(mesh);
+  const std::string same = dir / "sub/../in.ply";
+  for (const std::string& command :
+       {"decimate -q " + mesh + " -o " + mesh + " --ratio 0.5",
+        "simplify -q " + mesh + " -o " + same + " --ratio 0.5",
+        "cluster -q " + mesh + " -o " + same + " --grid 8", "convert -q " + mesh + " " + mesh}) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << command;
+    EXPECT_NE(r.err.find("the output would replace the input"), std::string::npos) << r.err;
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_EQ(file_bytes(mesh), before) << command;
+  }
+  EXPECT_EQ(run("decimate -q " + mesh + " -o " + (dir / "out.ply") + " --ratio 0.5", dir).exit_code, 0);
+}
+
 // What info --json, compare and bench print went nowhere, with exit 0, when standard output was a full disk
 // or closed.
 TEST(Cli, AFailedWriteToStandardOutputIsAnError) {

@@ -272,8 +272,12 @@ void check_destination(const std::string& path) {
   check_writable(path);
 }
 
-FileFormat check_mesh_destination(const std::string& path) {
+FileFormat check_mesh_destination(const std::string& path, const std::string& input) {
   const FileFormat format = format_from_extension(path);
+  if (!input.empty() && same_file(path, input)) {
+    throw Error(path, {},
+                "the output would replace the input; write another file, then rename it over the input");
+  }
   check_destination(path);
   return format;
 }

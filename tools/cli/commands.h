@@ -74,8 +74,10 @@ void write_result(const std::string& path, const IndexedMesh& mesh, const WriteO
 // folder that does not exist or cannot take a new file (hours of clustering would otherwise be lost, or the
 // mesh written and the command then fail on its report).
 void check_destination(const std::string& path);
-// A mesh destination: its extension must name a format (returned), and check_destination must pass.
-FileFormat check_mesh_destination(const std::string& path);
+// A mesh destination: its extension must name a format (returned), and check_destination must pass. With
+// `input`, it must not be that file: a simplified mesh written over its original (a typo in a script) loses
+// what may have taken hours to scan, so replacing it takes a second step.
+FileFormat check_mesh_destination(const std::string& path, const std::string& input = {});
 
 // Whether two paths name the same file however they are spelled (./a.ply, a symbolic link to it); either
 // may not exist yet.

@@ -24,7 +24,8 @@ void add_convert_command(CLI::App& app) {
       ->check(whole_number(0, 10));
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
-    const FileFormat to = check_mesh_destination(flags->output);  // refuse a bad destination first
+    const FileFormat to =
+        check_mesh_destination(flags->output, flags->input);  // refuse a bad destination first
     // At peak on gen 4 M: 20 bytes a face to PLY, OBJ or STL, 113 to Draco (its encoder's tables).
     check_whole_mesh_fits({flags->input}, to == FileFormat::drc ? 100 : 16, "convert holds the whole mesh",
                           "");

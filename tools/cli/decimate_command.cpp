@@ -77,7 +77,7 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();
-    check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
+    check_mesh_destination(flags->output, flags->input);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
     DecimateOptions options = flags->options;
     const auto limit = limit_threads(options.threads);

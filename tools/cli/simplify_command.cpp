@@ -90,7 +90,7 @@ void add_simplify_command(CLI::App& app) {
     if (options.target_faces == 0 && options.target_ratio == 0 && !std::isfinite(options.max_error)) {
       throw Error("simplify needs --faces N, --ratio R or a finite --max-error E");
     }
-    check_mesh_destination(flags->output);  // refuse a bad destination before reading anything
+    check_mesh_destination(flags->output, flags->input);  // refuse a bad destination before reading anything
     if (!flags->report.empty()) check_report_destination(flags->report, {flags->input, flags->output});
     if (!flags->memory_limit.empty()) options.memory_limit = parse_byte_size(flags->memory_limit);
     const Console console = make_console(flags->quiet, flags->input);
