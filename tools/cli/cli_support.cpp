@@ -1,4 +1,5 @@
 // What the commands share: the progress bar, timing, the summary table and JSON reports.
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <charconv>
@@ -194,8 +195,15 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-bool show_summary(bool quiet) {
-  return !quiet && ::isatty(STDOUT_FILENO);
+bool is_standard_output(const std::string& path) {
+  struct stat file {
+  }, out{};
+  return !path.empty() && ::stat(path.c_str(), &file) == 0 && ::fstat(STDOUT_FILENO, &out) == 0 &&
+         file.st_dev == out.st_dev && file.st_ino == out.st_ino;
+}
+
+bool show_summary(bool quiet, const std::string& report) {
+  return !quiet && !is_standard_output(report);
 }
 
 std::string seam_copies_note(std::uint64_t copies) {

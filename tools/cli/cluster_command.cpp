@@ -172,7 +172,7 @@ void add_cluster_command(CLI::App& app) {
                    "ocsimp: warning: the %s target was not reached (the finest grid has %llu cells)\n",
                    flags->vertices ? "vertex" : "face", static_cast<unsigned long long>(stats.fine_cells));
     }
-    if (!flags->quiet) {
+    if (show_summary(flags->quiet, flags->report)) {
       std::printf(
           "%s: %llu triangles -> %llu vertices, %llu faces (%llu fine cells) in %.2f s, peak RSS %s\n",
           flags->input.c_str(), static_cast<unsigned long long>(stats.input_triangles),

@@ -109,9 +109,11 @@ double seconds_since(std::chrono::steady_clock::time_point start);
 // machine's: see worker_threads) while the result lives; 0 (or less): all cores, and nothing is returned.
 std::unique_ptr<tbb::global_control> limit_threads(int threads);
 
-// Whether the end-of-run summary goes to stdout: not with --quiet, and not on a pipe or file (where only
-// errors are written; --report gives the same numbers as JSON).
-bool show_summary(bool quiet);
+// Whether `path` is where standard output goes (--report /dev/stdout, or the file stdout is redirected to).
+bool is_standard_output(const std::string& path);
+// Whether the end-of-run summary goes to stdout: not with --quiet, and not when the report goes there (it
+// would follow the JSON and make it unreadable).
+bool show_summary(bool quiet, const std::string& report);
 // What a summary says after a count of positions when the decimator wrote a texture seam's vertex once per
 // side (DecimateStats::seam_copies): " (+N copies along seams)", or nothing.
 std::string seam_copies_note(std::uint64_t copies);

@@ -133,6 +133,7 @@ void add_compare_command(CLI::App& app) {
       std::printf("%s\n", json_text(out).c_str());
       return;
     }
+    if (is_standard_output(flags->report)) return;  // the report is the output: a table after it is noise
     std::printf("original    %s: %zu vertices, %zu faces, bounding-box diagonal %g\n",
                 flags->original.c_str(), original.vertices, original.faces, d.diagonal);
     std::printf("simplified  %s: %zu vertices, %zu faces\n", flags->simplified.c_str(), simplified.vertices,

@@ -168,7 +168,7 @@ void add_decimate_command(CLI::App& app) {
     }
     if (!s.target_reached)
       std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", s.reason.c_str());
-    if (!flags->quiet) {
+    if (show_summary(flags->quiet, flags->report)) {
       std::printf(
           "%s: %zu faces -> %llu faces, %llu vertices%s (%s) in %.2f s (decimate %.2f s), largest cost "
           "%.3g, peak RSS %s\n",

@@ -205,7 +205,7 @@ void add_lod_command(CLI::App& app) {
                      static_cast<unsigned long long>(level.target_faces), level.decimate.reason.c_str());
       }
     }
-    if (show_summary(flags->quiet)) {
+    if (show_summary(flags->quiet, flags->report)) {
       print_phase_table(result.phases);
       std::printf("\n%-12s %12s %12s %10s %14s  %s\n", "level", "faces", "vertices", "seconds", "max error",
                   "file");

@@ -135,7 +135,7 @@ void add_simplify_command(CLI::App& app) {
     if (!result.decimate.target_reached && !result.decimate.reason.empty()) {
       std::fprintf(stderr, "ocsimp: warning: target not reached: %s\n", result.decimate.reason.c_str());
     }
-    if (show_summary(flags->quiet)) {
+    if (show_summary(flags->quiet, flags->report)) {
       print_phase_table(result.phases);
       std::printf(
           "%-14s %10.3f   %s -> %s: %zu faces, %zu vertices%s, max error %.6g (distance)%s%s, peak RSS %s\n",
