@@ -113,6 +113,57 @@ int open_unnamed(const std::string& folder) {
 constexpr std::size_t kTempDecoration = std::string_view(".").size() + std::string_view(".tmp.XXXXXX").size();
 constexpr std::size_t kNameMax = 255;
 
+// Links the unnamed file `fd` into its folder under a fresh name made from `pattern` (its Xs replaced), for
+// the rename: linkat cannot replace an existing file, and rename needs a name to move. Registered at once,
+// so that SIGINT, SIGTERM and SIGHUP remove it in the moment before the rename.
+std::string give_name(int fd, const std::string& pattern, const std::string& path) {
+  const std::string proc = "/proc/self/fd/" + std::to_string(fd);
+  static std::atomic<unsigned> counter{0};
+  const std::size_t x = pattern.rfind("XXXXXX");
+  for (int attempt = 0; attempt < 1000; ++attempt) {
+    std::string name = pattern;
+    const unsigned long n = (static_cast<unsigned long>(::getpid()) << 16) ^ counter++ ^ (attempt * 7919ul);
+    static constexpr char kDigits[] = "0123456789abcdefghijklmnopqrstuvwxyz";
+    for (std::size_t i = 0; i < 6; ++i) name[x + i] = kDigits[(n >> (5 * i)) % 36];
+    if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, name.c_str(), AT_SYMLINK_FOLLOW) == 0) {
+      register_live(name);
+      return name;
+    }
+    if (errno != EEXIST) break;
+  }
+  throw Error(path, {}, system_reason("cannot name the finished temporary file"));
+}
+
+// Names a finished file if it has no name yet, closes it and renames it over its target.
+void publish(FinishedFile& file) {
+  if (file.unnamed) {
+    file.temp_path = give_name(file.fd, file.temp_path, file.path);
+    file.unnamed = false;
+  }
+  const int fd = file.fd;
+  file.fd = -1;
+  if (::close(fd) != 0) throw Error(file.path, {}, system_reason("close failed"));
+  if (std::rename(file.temp_path.c_str(), file.target_path.c_str()) != 0)
+    throw Error(file.path, {}, system_reason("cannot rename the finished temporary into place"));
+  unregister_live(file.temp_path);
+  file.temp_path.clear();
+}
+
+// Deletes a finished file that was not published: an unnamed one is gone with its descriptor.
+void discard(FinishedFile& file) {
+  if (file.fd >= 0) ::close(file.fd);
+  file.fd = -1;
+  if (!file.unnamed && !file.temp_path.empty()) {
+    ::unlink(file.temp_path.c_str());
+    unregister_live(file.temp_path);
+  }
+  file.temp_path.clear();
+}
+
+// The files that commit() hands to the live HeldCommits, if any.
+std::mutex g_held_mutex;
+std::vector<FinishedFile>* g_held = nullptr;
+
 }  // namespace
 
 void check_writable(const std::string& path) {
@@ -152,7 +203,7 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), buffer_(buffe
 AtomicFile::~AtomicFile() {
   if (!committed_) {
     if (fd_ >= 0) ::close(fd_);
-    if (direct_ || (unnamed_ && !named_)) return;  // an unnamed file is gone with its descriptor
+    if (direct_ || unnamed_) return;  // an unnamed file is gone with its descriptor
     ::unlink(temp_path_.c_str());
     unregister_live(temp_path_);
   }
@@ -222,40 +273,53 @@ void AtomicFile::commit() {
     ::umask(mask);
     ::fchmod(fd_, 0666 & ~mask);
   }
-  if (unnamed_) give_name();
-  if (::close(fd_) != 0) {
-    fd_ = -1;
-    throw Error(path_, {}, system_reason("close failed"));
-  }
+  // The finished file is handed over: to a HeldCommits that makes it appear later, or made to appear now.
+  FinishedFile finished{path_, target_path_, temp_path_, fd_, unnamed_};
   fd_ = -1;
-  if (std::rename(temp_path_.c_str(), target_path_.c_str()) != 0) {
-    throw Error(path_, {}, system_reason("cannot rename the finished temporary into place"));
-  }
   committed_ = true;
-  unregister_live(temp_path_);
-}
-
-// Links the unnamed file into its folder under a fresh temporary name, for the rename: linkat cannot replace
-// an existing file, and rename needs a name to move. Registered at once, so that SIGINT, SIGTERM and SIGHUP
-// remove it in the moment before the rename.
-void AtomicFile::give_name() {
-  const std::string proc = "/proc/self/fd/" + std::to_string(fd_);
-  static std::atomic<unsigned> counter{0};
-  const std::size_t x = temp_path_.rfind("XXXXXX");
-  for (int attempt = 0; attempt < 1000; ++attempt) {
-    std::string name = temp_path_;
-    const unsigned long n = (static_cast<unsigned long>(::getpid()) << 16) ^ counter++ ^ (attempt * 7919ul);
-    static constexpr char kDigits[] = "0123456789abcdefghijklmnopqrstuvwxyz";
-    for (std::size_t i = 0; i < 6; ++i) name[x + i] = kDigits[(n >> (5 * i)) % 36];
-    if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, name.c_str(), AT_SYMLINK_FOLLOW) == 0) {
-      temp_path_ = name;
-      named_ = true;
-      register_live(temp_path_);
+  {
+    std::lock_guard lock(g_held_mutex);
+    if (g_held) {
+      g_held->push_back(std::move(finished));
       return;
     }
-    if (errno != EEXIST) break;
   }
-  throw Error(path_, {}, system_reason("cannot name the finished temporary file"));
+  try {
+    publish(finished);
+  } catch (...) {
+    discard(finished);
+    throw;
+  }
+}
+
+HeldCommits::HeldCommits() {
+  std::lock_guard lock(g_held_mutex);
+  if (g_held) throw Error("commits are already held");
+  g_held = &files_;
+}
+
+HeldCommits::~HeldCommits() {
+  {
+    std::lock_guard lock(g_held_mutex);
+    if (g_held == &files_) g_held = nullptr;
+  }
+  for (FinishedFile& file : files_) discard(file);
+}
+
+void HeldCommits::release() {
+  {
+    std::lock_guard lock(g_held_mutex);
+    g_held = nullptr;
+  }
+  std::size_t i = 0;
+  try {
+    for (; i < files_.size(); ++i) publish(files_[i]);
+  } catch (...) {
+    for (std::size_t j = i; j < files_.size(); ++j) discard(files_[j]);
+    files_.clear();
+    throw;
+  }
+  files_.clear();
 }
 
 }  // namespace ocsimp

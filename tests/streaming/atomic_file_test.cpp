@@ -32,5 +32,39 @@ TEST(AtomicFile, NothingIsWrittenOrCommittedTwice) {
   EXPECT_EQ(entries, 1u);  // no temporary left beside it
 }
 
+// lod's levels appear together: a run that failed or was interrupted after its first level left it behind.
+TEST(AtomicFile, HeldCommitsAppearTogetherOrNotAtAll) {
+  test::TempDir dir;
+  auto entries = [&] {
+    std::size_t n = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(dir.path)) n += !entry.path().empty();
+    return n;
+  };
+  {
+    HeldCommits held;
+    AtomicFile a(dir / "a.txt"), b(dir / "b.txt");
+    a.write("a");
+    a.commit();
+    b.write("b");
+    b.commit();
+    EXPECT_EQ(entries(), 0u);  // complete, but not there yet
+    EXPECT_THROW(HeldCommits(), Error);  // one at a time
+    held.release();
+    EXPECT_EQ(test::file_bytes(dir / "a.txt"), "a");
+    EXPECT_EQ(test::file_bytes(dir / "b.txt"), "b");
+  }
+  {
+    HeldCommits held;
+    AtomicFile c(dir / "c.txt");
+    c.write("c");
+    c.commit();
+  }  // never released: gone
+  EXPECT_EQ(entries(), 2u);
+  AtomicFile d(dir / "d.txt");  // no HeldCommits alive: at once
+  d.write("d");
+  d.commit();
+  EXPECT_EQ(test::file_bytes(dir / "d.txt"), "d");
+}
+
 }  // namespace
 }  // namespace ocsimp

@@ -9,6 +9,7 @@
 
 #include "commands.h"
 #include "ocsimp/core/error.h"
+#include "ocsimp/streaming/atomic_file.h"
 #include "ocsimp/streaming/io.h"
 #include "ocsimp/tools/pipeline.h"
 
@@ -162,6 +163,9 @@ void add_lod_command(CLI::App& app) {
       vertices.push_back(mesh.vertex_count());
       write_result(files.back(), mesh, write);
     };
+    // The levels and the report appear together once all are written: a run that fails or is interrupted
+    // part way leaves none, rather than a few levels beside stale ones from an earlier run.
+    HeldCommits held;
     const auto start = std::chrono::steady_clock::now();
     const LodResult result = lod(flags->input, options);
     const double total = seconds_since(start);
@@ -199,6 +203,7 @@ void add_lod_command(CLI::App& app) {
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);
     }
+    held.release();
     for (const LodLevel& level : result.levels) {
       if (!level.decimate.target_reached && !level.decimate.reason.empty()) {
         std::fprintf(stderr, "ocsimp: warning: level %llu: %s\n",

@@ -41,7 +41,6 @@ class AtomicFile {
  private:
   void check_open() const;
   void flush();
-  void give_name();
 
   std::string path_;         // as given, for messages
   std::string target_path_;  // what the rename replaces: path_ with its symbolic links followed
@@ -52,8 +51,32 @@ class AtomicFile {
   std::uint64_t flushed_ = 0;
   bool committed_ = false;
   bool direct_ = false;   // writing straight to path_ (not a regular file), no temporary
-  bool unnamed_ = false;  // an O_TMPFILE file, until give_name() links it as temp_path_
-  bool named_ = false;
+  bool unnamed_ = false;  // an O_TMPFILE file, until commit() names it (from temp_path_, its Xs replaced)
+};
+
+// A complete output whose rename is still to come (see HeldCommits).
+struct FinishedFile {
+  std::string path, target_path, temp_path;
+  int fd = -1;
+  bool unnamed = false;
+};
+
+// While one is alive, AtomicFile::commit() (on any thread) completes its file but holds back the rename that
+// makes it appear, so that a set of outputs (lod's levels and report) appears together or not at all.
+// release() makes them appear, in the order they were committed; destruction without it deletes them, and a
+// process that dies first leaves none (they are unnamed until then, or removed by the signal handler). One
+// at a time: a second, while one is alive, throws Error. Files written directly (a device, a FIFO) are
+// written at once.
+class HeldCommits {
+ public:
+  HeldCommits();
+  ~HeldCommits();
+  HeldCommits(const HeldCommits&) = delete;
+  HeldCommits& operator=(const HeldCommits&) = delete;
+  void release();
+
+ private:
+  std::vector<FinishedFile> files_;
 };
 
 // Throws the error that writing `path` would meet, before any work: creates and deletes a temporary beside
