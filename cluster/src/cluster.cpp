@@ -449,6 +449,9 @@ QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options, Clust
   if (!options.octree && options.target_vertices > 0) {
     throw Error("an exact vertex count needs the octree");
   }
+  // 0 means "use the grid resolution"; a negative or NaN size fell back to it without a word.
+  if (!(options.cell_size >= 0.0))
+    throw Error("the cell size must be positive (or 0 for the grid resolution)");
   if (!(options.fine_cells_per_target >= 1.0) || !std::isfinite(options.fine_cells_per_target)) {
     throw Error("fine_cells_per_target must be at least 1");
   }

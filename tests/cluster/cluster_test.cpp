@@ -1237,6 +1237,11 @@ TEST(Cluster, RejectsBadInputAndImpossibleOptions) {
   ClusterOptions tiny;
   tiny.cell_size = 1e-9;
   EXPECT_THROW(run(test::grid_square(4), tiny), Error);
+  for (double size : {-0.1, std::numeric_limits<double>::quiet_NaN()}) {
+    ClusterOptions odd;  // fell back to the grid resolution without a word
+    odd.cell_size = size;
+    EXPECT_THROW(run(test::grid_square(4), odd), Error) << size;
+  }
   // The message gives the size asked for and the smallest allowed, not six fixed decimals ("0.000000").
   std::string message;
   try {

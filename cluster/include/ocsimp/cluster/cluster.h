@@ -71,9 +71,11 @@ struct ClusterOptions {
 
   // Adaptive octree instead of the uniform grid. Needs exactly one of `target_vertices`, `target_faces`.
   bool octree = false;
-  // Octree only: exactly this many output vertices, each a corner of an output face (fewer only when the
-  // finest grid the input allows has fewer occupied cells; ClusterStats::target_met then says so). Parts of
-  // the input smaller than a cluster end as vertices of no face; they count too.
+  // Octree only: exactly this many output vertices (fewer only when the finest grid the input allows has
+  // fewer occupied cells; ClusterStats::target_met then says so), each a corner of an output face except
+  // where every triangle of a cluster collapsed: a part of the input, or a thin piece of one (a leg, an ear
+  // at a few dozen vertices), within a cluster's width. Such a vertex of no face counts too
+  // (ClusterStats::isolated_vertices).
   std::uint64_t target_vertices = 0;
   // Never exceeded. Octree: the largest face count not above this that merging reaches. Uniform grid: the
   // re-clustering of the fine grid's cells whose face count a search over resolutions finds closest below

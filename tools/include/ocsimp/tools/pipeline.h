@@ -44,9 +44,10 @@ struct SimplifyOptions {
   // more where clustering it in core would still take less than clustering its faces as a soup), and past
   // that the faces are dereferenced on disk under TMPDIR (io.h, ReadOptions::memory_budget).
   std::uint64_t memory_limit = 0;
-  // Cluster first even when the input would fit in core (to study the stages on any mesh). An input no larger
-  // than the intermediate (at least 2^18 faces unless `intermediate` is set) is still decimated directly:
-  // clustering it would merge nothing and only approximate the decimator's own quadrics.
+  // Cluster first even when the input would fit in core (to study the stages on any mesh). Unless
+  // `intermediate` is set, an input no larger than the intermediate (at least 2^18 faces) is still decimated
+  // directly: clustering it would merge nothing and only approximate the decimator's own quadrics. With
+  // `intermediate` set, it is clustered to at most its own size, as asked.
   bool two_stage = false;
   // Intermediate face count as a multiple of the target. 0: chosen from the memory budget (at most 8).
   double intermediate = 0;
