@@ -207,6 +207,8 @@ bool holds_origin(FileFormat format) {
 
 void write_mesh(const std::string& path, const IndexedMesh& mesh, const WriteOptions& options) {
   const FileFormat format = options.format ? *options.format : format_from_extension(path);
+  // PLY and OBJ wrote it into every coordinate, which the readers then refused.
+  if (!mesh.origin.allFinite()) throw Error(path, {}, "the mesh's origin is not a finite point");
   if (!holds_origin(format) && mesh.origin != Vec3d::Zero()) {
     // STL and Draco hold float coordinates only: they get the nearest floats to the true positions.
     IndexedMesh placed = mesh;

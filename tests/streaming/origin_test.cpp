@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -254,6 +256,13 @@ TEST(Origin, PlyAndObjWritersPutTheOriginBack) {
   // Without an origin the PLY stays float.
   write_mesh(dir / "zero.ply", test::grid_square(2));
   EXPECT_NE(test::file_bytes(dir / "zero.ply").find("property float x"), std::string::npos);
+  // A non-finite origin went into every coordinate, and the readers refused the file written.
+  IndexedMesh lost = test::grid_square(2);
+  lost.origin.x() = std::numeric_limits<double>::quiet_NaN();
+  for (const char* name : {"nan.ply", "nan.obj", "nan.stl"}) {
+    EXPECT_THROW(write_mesh(dir / name, lost), Error) << name;
+    EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  }
 }
 
 TEST(Origin, StlGetsTheNearestFloatsToTheTruePositions) {
