@@ -64,8 +64,11 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_option("--shape-weight", o.shape_weight, "Penalty on collapses that leave slivers (0: off)")
       ->capture_default_str()
       ->check(non_negative_number());
-  cmd->add_option("--attribute-weight", o.attribute_weight,
-                  "Penalty on collapses across normal, color or uv differences (0: geometry only)")
+  cmd->add_option(
+         "--attribute-weight", o.attribute_weight,
+         "Penalty on collapsing an edge whose ends differ in normal, color or uv: keeps sharp "
+         "attribute boundaries (a color edge); on smoothly varying attributes it costs both geometry "
+         "and attribute accuracy (0: geometry only)")
       ->capture_default_str()
       ->check(non_negative_number());
   add_weld_flag(cmd, o.weld);

@@ -94,7 +94,12 @@ struct DecimateOptions {
   // Attribute penalty: a collapse costs this much more, times the pair's quadric area, the squared edge
   // length and the squared attribute difference across the edge (normals: unit-vector distance; colors: per
   // channel in [0,1]; uvs: uv distance). 0 (default): geometry alone decides; attributes are still
-  // interpolated along each collapse at the placement's parameter on the edge.
+  // interpolated along each collapse at the placement's parameter on the edge. The penalty charges a
+  // difference across an edge, not a departure from what interpolation reproduces, so it suits sharp
+  // attribute boundaries (a two-colored sphere's boundary smears over half the area) and not smooth fields:
+  // a sphere of 20 k faces with a sine color pattern, to 1,000 faces, had twice the color error and 3.5 times
+  // the Hausdorff distance at weight 1 as at 0. Attribute quadrics (Garland & Heckbert 1998, Hoppe 1999)
+  // would measure the latter; they are not implemented.
   double attribute_weight = 0;
 
   // Merge vertices at exactly equal positions before decimating (their quadrics add), so that what a file
