@@ -235,10 +235,12 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // (a warning at every run whose grid merely could come out larger would be noise). An indexed pass holds
   // the vertex array beside its accumulating cells, counted at the margin's number as they are the smaller
   // part, and releases it before the merge state grows.
-  const double cells_needed = fine_cells * cell_bytes;
-  const double pass_peak = vertex_bytes + kLevelMargin * fine_cells * pass_bytes;
-  const double expected_peak =
-      process_bytes + (soup ? held_bytes + cells_needed : std::max(pass_peak, cells_needed));
+  // The peak of an indexed clustering whose merge state holds `cells` and whose pass holds `pass_cells`.
+  auto indexed_peak = [&](double cells, double pass_cells) {
+    return process_bytes + std::max(vertex_bytes + pass_cells * pass_bytes, cells * cell_bytes);
+  };
+  const double expected_peak = soup ? process_bytes + held_bytes + fine_cells * cell_bytes
+                                    : indexed_peak(fine_cells, kLevelMargin * fine_cells);
   // In core when the decimation fits the limit, and also when it does not but clustering first would take
   // more: a 2 M-triangle scan to 1.5 M faces under a 300 MB limit was clustered (757 MiB, 4.4 s) where
   // decimating directly took 297 MiB and 1.6 s.
@@ -308,8 +310,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     if (expected_peak > budget) warn_over(expected_peak);
   } else {
     cluster_options.accept_fine_cells = [&](std::uint64_t cells) {
-      const double count = static_cast<double>(cells);
-      const double peak = process_bytes + std::max(vertex_bytes + count * pass_bytes, count * cell_bytes);
+      const double peak = indexed_peak(static_cast<double>(cells), static_cast<double>(cells));
       if (peak <= budget) return true;
       if (may_decimate_directly && in_core_peak < peak) {
         declined_peak = peak;
