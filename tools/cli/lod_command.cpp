@@ -135,10 +135,7 @@ void add_lod_command(CLI::App& app) {
       std::vector<std::string> meshes{flags->input};
       for (std::uint64_t faces : levels) {
         meshes.push_back(lod_level_path(flags->output, faces, several));
-        check_mesh_destination(meshes.back());
-        if (same_file(meshes.back(), flags->input))
-          throw Error(meshes.back(), {},
-                      "the level of " + std::to_string(faces) + " faces would replace the input");
+        check_mesh_destination(meshes.back(), flags->input);
       }
       if (!flags->report.empty()) check_report_destination(flags->report, meshes);
     };
