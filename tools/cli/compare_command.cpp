@@ -129,11 +129,12 @@ void add_compare_command(CLI::App& app) {
       report["peak_rss_bytes"] = peak_rss_bytes();
       write_json_report(flags->report, report);
     }
+    // The report is then the output: the table, or --json's copy of the same fields, would follow it.
+    if (is_standard_output(flags->report)) return;
     if (flags->json) {
       std::printf("%s\n", json_text(out).c_str());
       return;
     }
-    if (is_standard_output(flags->report)) return;  // the report is the output: a table after it is noise
     std::printf("original    %s: %zu vertices, %zu faces, bounding-box diagonal %g\n",
                 flags->original.c_str(), original.vertices, original.faces, d.diagonal);
     std::printf("simplified  %s: %zu vertices, %zu faces\n", flags->simplified.c_str(), simplified.vertices,
