@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <array>
 
-#include "ocsimp/core/error.h"
-
 namespace ocsimp {
 namespace {
 
