@@ -806,6 +806,37 @@ TEST(Cli, AnOutputThatWouldReplaceItsInputIsRefused) {
   EXPECT_EQ(run("decimate -q " + mesh + " -o " + (dir / "out.ply") + " --ratio 0.5", dir).exit_code, 0);
 }
 
+// CLI11 gives an option the next word even when it is a flag: `-o --faces 100` wrote the mesh to a file
+// named "--faces" (in the working directory) and then called 100 an unexpected argument.
+TEST(Cli, AFlagIsNotTakenForAnOutputFileName) {
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply", out = dir / "out.ply";
+  write_mesh(mesh, test::sphere(3));
+  for (const std::string& command :
+       {"decimate -q " + mesh + " -o --faces 100", "simplify -q " + mesh + " -o --faces 100",
+        "cluster -q " + mesh + " -o --grid 8", "lod -q " + mesh + " -o --faces 100",
+        "decimate -q " + mesh + " -o " + out + " --faces 100 --report --threads 1"}) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << command;
+    EXPECT_NE(r.err.find("is an option, not a file name"), std::string::npos) << command << "\n" << r.err;
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    for (const char* name : {"--faces", "--grid", "--threads"}) {
+      EXPECT_FALSE(std::filesystem::exists(name)) << command;
+      std::filesystem::remove(name);
+    }
+    EXPECT_FALSE(std::filesystem::exists(out)) << command;
+  }
+  const CommandResult empty = run("decimate -q " + mesh + " -o '' --faces 100", dir);
+  EXPECT_EQ(empty.exit_code, 2);
+  EXPECT_NE(empty.err.find("an empty file name"), std::string::npos) << empty.err;
+  // convert takes its output as a word or, as every other command, after -o.
+  const std::string as_word = dir / "word.obj", after_o = dir / "o.obj";
+  ASSERT_EQ(run("convert -q " + mesh + " " + as_word, dir).exit_code, 0);
+  ASSERT_EQ(run("convert -q " + mesh + " -o " + after_o, dir).exit_code, 0);
+  EXPECT_EQ(file_bytes(after_o), file_bytes(as_word));
+  EXPECT_FALSE(file_bytes(after_o).empty());
+}
+
 // A summary printed after a report sent to standard output made it unreadable as JSON; simplify and lod
 // printed theirs only on a terminal, unlike decimate and cluster.
 TEST(Cli, AReportOnStandardOutputIsAllThatIsPrinted) {

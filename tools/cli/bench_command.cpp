@@ -65,8 +65,8 @@ void add_bench_command(CLI::App& app) {
       ->check(thread_count());
   cmd->add_option("--name", flags->name,
                   "The mesh's label in the table (default: the file name without extension)");
-  cmd->add_option("--json", flags->json, "Also write every number as JSON to this file");
-  cmd->add_option("--csv", flags->csv, "Also write every number as CSV to this file");
+  cmd->add_option("--json", flags->json, "Also write every number as JSON to this file")->check(file_name());
+  cmd->add_option("--csv", flags->csv, "Also write every number as CSV to this file")->check(file_name());
   cmd->add_flag("-q,--quiet", flags->quiet, "Only the table: no progress lines on stderr");
   cmd->callback([flags] {
     if (flags->faces.empty() && flags->ratios.empty()) throw Error("bench: give --faces or --ratios");

@@ -121,6 +121,19 @@ CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
       wanted);
 }
 
+CLI::Validator file_name() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        if (text.empty()) return "an empty file name";
+        // CLI11 gives an option the next word even when it is a flag: `-o --faces 100` wrote the mesh to a
+        // file named "--faces" and then called 100 unexpected. A file of that name is still ./--faces.
+        if (text.size() > 1 && text[0] == '-')
+          return "'" + text + "' is an option, not a file name (./" + text + " names such a file)";
+        return {};
+      },
+      "FILE");
+}
+
 void add_weld_flag(CLI::App* cmd, bool& weld) {
   cmd->add_flag("--weld,!--no-weld", weld,
                 "Merge vertices at exactly equal positions before decimating, so seams and the corners of a "

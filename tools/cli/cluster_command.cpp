@@ -27,7 +27,9 @@ void add_cluster_command(CLI::App& app) {
   };
   auto flags = std::make_shared<Flags>();
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
-  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
+  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
+      ->check(file_name())
+      ->required();
   auto* grid = cmd->add_option("--grid", flags->options.grid, "Uniform grid: cells along the longest axis")
                    ->capture_default_str()
                    ->check(whole_number(1, 1u << 21));
@@ -64,7 +66,8 @@ void add_cluster_command(CLI::App& app) {
                   "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());
-  cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON");
+  cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON")
+      ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");
   cmd->callback([flags, grid] {

@@ -44,6 +44,9 @@ CLI::Validator thread_count();
 // A memory size parse_byte_size() takes, of at least one byte ("0" and "0.5" meant the default before).
 CLI::Validator byte_size();
 
+// An output or report file name: not empty, and not a word that starts with '-' (a flag taken for the name).
+CLI::Validator file_name();
+
 // --weld / --no-weld, for each command that decimates (DecimateOptions::weld).
 void add_weld_flag(CLI::App* cmd, bool& weld);
 

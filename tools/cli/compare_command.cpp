@@ -70,7 +70,8 @@ void add_compare_command(CLI::App& app) {
   cmd->add_flag("--no-vertices", flags->no_vertices,
                 "Do not also measure every vertex (vertices only raise the Hausdorff distance)");
   cmd->add_flag("--json", flags->json, "Print one JSON object instead of a table");
-  cmd->add_option("--report", flags->report, "Also write the JSON, with timing, to this file");
+  cmd->add_option("--report", flags->report, "Also write the JSON, with timing, to this file")
+      ->check(file_name());
   cmd->add_option("--threads", flags->threads, "Threads (0 = all cores); the numbers do not depend on it")
       ->capture_default_str()
       ->check(thread_count());

@@ -14,7 +14,10 @@ void add_convert_command(CLI::App& app) {
   };
   auto flags = std::make_shared<Flags>();
   cmd->add_option("input", flags->input, "Input mesh (format detected from content)")->required();
-  cmd->add_option("output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
+  // Also as -o, the spelling every other command that writes a mesh takes.
+  cmd->add_option("output,-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
+      ->check(file_name())
+      ->required();
   cmd->add_flag("--ascii", flags->write.ascii, "Text PLY or STL instead of binary");
   cmd->add_option("--draco-bits", flags->write.draco_position_bits, "Draco position quantization bits")
       ->capture_default_str()

@@ -28,7 +28,9 @@ void add_decimate_command(CLI::App& app) {
   auto flags = std::make_shared<Flags>();
   DecimateOptions& o = flags->options;
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
-  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
+  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
+      ->check(file_name())
+      ->required();
   CLI::Option* faces =
       cmd->add_option(
              "--faces", o.target_faces,
@@ -75,7 +77,8 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());
-  cmd->add_option("--report", flags->report, "Write counts, statistics, times and peak memory as JSON");
+  cmd->add_option("--report", flags->report, "Write counts, statistics, times and peak memory as JSON")
+      ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar, no summary");
   cmd->callback([flags] {

@@ -20,6 +20,7 @@ void add_gen_command(CLI::App& app) {
   };
   auto flags = std::make_shared<Flags>();
   cmd->add_option("-o,--output", flags->output, "Output file (.ply; other formats go through memory)")
+      ->check(file_name())
       ->required();
   cmd->add_option("--triangles", flags->options.triangles,
                   "Triangles wanted; the lattice reaches the nearest 12 n^2 per component")

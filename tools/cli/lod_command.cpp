@@ -95,6 +95,7 @@ void add_lod_command(CLI::App& app) {
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
   cmd->add_option("-o,--output", flags->output,
                   "Output pattern; {faces} becomes each level's target, e.g. 'out_{faces}.ply'")
+      ->check(file_name())
       ->required();
   auto* faces = cmd->add_option("--faces", flags->faces,
                                 "Face counts of the levels, comma-separated, e.g. 1000000,100000,10000");
@@ -117,7 +118,8 @@ void add_lod_command(CLI::App& app) {
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());
-  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)");
+  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)")
+      ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
   cmd->add_flag("-q,--quiet", flags->quiet, "Only warnings and errors (no progress bars, no summary)");
   cmd->callback([flags] {

@@ -50,7 +50,9 @@ void add_simplify_command(CLI::App& app) {
   auto flags = std::make_shared<Flags>();
   SimplifyOptions& o = flags->options;
   cmd->add_option("input", flags->input, "Input mesh (PLY, OBJ, STL or Draco)")->required();
-  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")->required();
+  cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
+      ->check(file_name())
+      ->required();
   CLI::Option* faces =
       cmd->add_option("--faces", o.target_faces,
                       "Exact face count (N-1 where every collapse left removes two, as on a closed manifold)")
@@ -81,7 +83,8 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
       ->check(thread_count());
-  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)");
+  cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)")
+      ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
   cmd->add_flag("-q,--quiet", flags->quiet, "Only warnings and errors (no progress bars, no summary)");
   cmd->callback([flags] {
