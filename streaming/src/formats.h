@@ -1,9 +1,11 @@
 // The per-format readers and writers behind io.h. Each reader is a TriangleStream; read_mesh() drains it.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "ocsimp/core/mesh.h"
@@ -74,6 +76,38 @@ inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint
             " first corner's normal";
   }
   return note;
+}
+
+// One kind of data a reader passed over: what it is ("vertex property", "vertex properties") and the names
+// found, each once, in the order found. It keeps one more name than unread_note shows, to say there are more:
+// a header may declare thousands, and an OBJ may name a material on every other line.
+struct UnreadData {
+  static constexpr std::size_t kShown = 6;
+  std::string kind, kinds;  // singular and plural
+  std::vector<std::string> names;
+  void add(std::string_view name) {
+    if (names.size() <= kShown && std::find(names.begin(), names.end(), name) == names.end())
+      names.emplace_back(name);
+  }
+};
+
+// What ReadOptions::warn is told of data in the file that no output keeps (a scan's confidence values, a
+// PLY's face colors or texture file, an OBJ's materials and polylines), so that losing them is not silent;
+// empty when there is none.
+inline std::string unread_note(const std::vector<UnreadData>& unread) {
+  std::string note;
+  for (const UnreadData& data : unread) {
+    if (data.names.empty()) continue;
+    note += note.empty() ? "" : "; ";
+    note += (data.names.size() == 1 ? data.kind : data.kinds) + " ";
+    for (std::size_t i = 0; i < data.names.size() && i < UnreadData::kShown; ++i)
+      note += (i == 0 ? "" : ", ") + data.names[i];
+    if (data.names.size() > UnreadData::kShown) note += " and more";
+  }
+  if (note.empty()) return note;
+  return "not read, so no output keeps them (ocsimp reads triangles and their vertices' positions, normals, "
+         "colors and texture coordinates): " +
+         note;
 }
 
 // "normals, colors and texture coordinates", or the part of it that is true (see

@@ -234,6 +234,7 @@ class ObjStream final : public TriangleStream {
             faces_have_slashes_ = true;
           break;
         case Keyword::other:
+          note_unread(line);
           // Only before the first vertex, where the error can still apply: files of many g / usemtl lines
           // pay nothing after it.
           if (seen_.v == 0 && first_unknown_line_ == 0 && !known_statement(line)) {
@@ -256,6 +257,37 @@ class ObjStream final : public TriangleStream {
     flush_sink();
     total_ = seen_;
     if (warn_ && clamped_colors_ > 0) warn_(clamped_colors_note(clamped_colors_));
+    if (warn_) {
+      const std::string note = unread_note({material_libraries_, materials_, other_geometry_});
+      if (!note.empty()) warn_(note);
+    }
+  }
+
+  // Materials and geometry other than faces, for unread_note: the output has no place for them.
+  void note_unread(std::string_view line) {
+    const char* end = line.data() + line.size();
+    const char* p = skip_blanks(line.data(), end);
+    const char* keyword_end = token_end(p, end);
+    const std::string_view keyword(p, static_cast<std::size_t>(keyword_end - p));
+    // The argument: the rest of the statement up to a comment, without the blanks around it (a material or
+    // library name may hold blanks).
+    auto argument = [&] {
+      const char* first = skip_blanks(keyword_end, end);
+      const char* last = std::find(first, end, '#');
+      while (last > first && (last[-1] == ' ' || last[-1] == '\t' || last[-1] == '\r')) --last;
+      return std::string_view(first, static_cast<std::size_t>(last - first));
+    };
+    if (keyword == "mtllib") {
+      material_libraries_.add(argument());
+    } else if (keyword == "usemtl") {
+      materials_.add(argument());
+    } else if (keyword == "l") {
+      other_geometry_.add("polylines (l)");
+    } else if (keyword == "p") {
+      other_geometry_.add("points (p)");
+    } else if (keyword == "curv" || keyword == "curv2" || keyword == "surf") {
+      other_geometry_.add("free-form curves and surfaces");
+    }
   }
 
   // Up to `max` numbers into `values` (float or double); returns how many there were.
@@ -578,6 +610,9 @@ class ObjStream final : public TriangleStream {
   std::uint64_t face_statements_ = 0;
   std::uint64_t first_unknown_line_ = 0;  // of the first statement the format does not define (0: none)
   std::string first_unknown_;             // its keyword, quoted
+  UnreadData material_libraries_{"material library", "material libraries", {}};
+  UnreadData materials_{"material", "materials", {}};
+  UnreadData other_geometry_{"geometry other than faces:", "geometry other than faces:", {}};
   bool faces_have_slashes_ = false;
   bool needs_attribute_pass_ = false;
 

@@ -1,5 +1,6 @@
 #include "ply_header.h"
 
+#include <algorithm>
 #include <cstring>
 #include <string>
 #include <unordered_set>
@@ -67,7 +68,17 @@ class HeaderParser {
       const std::vector<std::string_view> words = split_words(line);
       if (words.empty()) continue;
       const std::string_view keyword = words[0];
-      if (keyword == "comment" || keyword == "obj_info") continue;
+      if (keyword == "comment" || keyword == "obj_info") {
+        if (keyword == "comment" && words.size() > 2 && words[1] == "TextureFile") {
+          // The name is the rest of the line, which may hold blanks.
+          std::string name(line.substr(static_cast<std::size_t>(words[2].data() - line.data())));
+          name.erase(name.find_last_not_of(" \t\r") + 1);
+          if (std::find(header.texture_files.begin(), header.texture_files.end(), name) ==
+              header.texture_files.end())
+            header.texture_files.push_back(std::move(name));
+        }
+        continue;
+      }
       if (keyword == "end_header") {
         if (words.size() != 1) fail("unexpected text after end_header");
         break;

@@ -573,6 +573,25 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
                 (ascii_ ? ply_type_is_integer(index_property.type)
                         : index_property.type == PlyType::int32 || index_property.type == PlyType::uint32);
 
+  if (warn_) {
+    UnreadData vertex_properties{"vertex property", "vertex properties", {}},
+        face_properties{face_element.name + " property", face_element.name + " properties", {}},
+        elements{"element", "elements", {}}, textures{"texture file", "texture files", {}};
+    for (std::size_t i = 0; i < vertex_plan_.slots.size(); ++i) {
+      if (vertex_plan_.slots[i] == Slot::none) vertex_properties.add(vertex_element.properties[i].name);
+    }
+    for (std::size_t i = 0; i < face_element.properties.size(); ++i) {
+      if (i != index_property_ && i != wedge_property_) face_properties.add(face_element.properties[i].name);
+    }
+    for (std::size_t i = 0; i < header_.elements.size(); ++i) {
+      if (i != vertex_element_ && i != face_element_ && header_.elements[i].count > 0)
+        elements.add(header_.elements[i].name);
+    }
+    for (const std::string& name : header_.texture_files) textures.add(name);
+    const std::string note = unread_note({vertex_properties, face_properties, elements, textures});
+    if (!note.empty()) warn_(note);
+  }
+
   const std::uint64_t data_bytes = reader_.file_size() - header_.data_offset;
   triangles_hint_ = strips_ ? strip_triangles_bound(face_element, data_bytes)
                             : bounded_face_count(face_element, index_property, ascii_, data_bytes);

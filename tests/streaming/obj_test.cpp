@@ -168,6 +168,29 @@ TEST(Obj, SaysHowManyVertexColorsItClamps) {
             "0..255 scale?)");
 }
 
+// An OBJ's materials went missing from every output without a word, as did its polylines and points.
+TEST(Obj, SaysWhatItDoesNotRead) {
+  TempDir dir;
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  test::write_file_bytes(dir / "m.obj",
+                         "mtllib the mats.mtl  # a library\no part\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n"
+                         "usemtl red\nf 1 2 3\nusemtl blue\nf 2 4 3\nusemtl red\nl 1 2\np 3\nl 2 3\n");
+  const IndexedMesh m = read_mesh(dir / "m.obj", options);
+  EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {1, 3, 2}}));
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_EQ(
+      told[0],
+      "not read, so no output keeps them (ocsimp reads triangles and their vertices' positions, normals, "
+      "colors and texture coordinates): material library the mats.mtl; materials red, blue; geometry "
+      "other than faces: polylines (l), points (p)");
+  told.clear();
+  test::write_file_bytes(dir / "plain.obj", "o part\ng side\ns 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  read_mesh(dir / "plain.obj", options);
+  EXPECT_TRUE(told.empty()) << told[0];
+}
+
 // Where only some faces give vt or vn, the vertices no such corner references get (0, 0) and zero normals,
 // which simplification blends into the real ones: the reader says how many. A vertex that some corner gives a
 // value is not counted, whichever corner comes first.

@@ -607,6 +607,53 @@ TEST(PlyTypes, FloatColorsOutsideZeroToOneAreClampedWithAWarning) {
   EXPECT_TRUE(told.empty()) << told[0];
 }
 
+// A scan's confidence values, face colors, an edge element or a texture file went missing from every output
+// without a word. The reader names what it does not read, once, and says nothing of a file it reads whole.
+TEST(PlyLayout, SaysWhatItDoesNotRead) {
+  test::TempDir dir;
+  const std::string body = "0 0 0 1 2\n1 0 0 1 2\n0 1 0 1 2\n3 0 1 2 255 0 0\n0 1\n1 2\n";
+  write_bytes(
+      dir / "extra.ply",
+      "ply\nformat ascii 1.0\ncomment TextureFile the skin.png\ncomment TextureFile the skin.png\n"
+      "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "property float confidence\nproperty uchar intensity\n"
+      "element face 1\nproperty list uchar int vertex_indices\nproperty uchar red\nproperty uchar green\n"
+      "property uchar blue\nelement edge 2\nproperty int vertex1\nproperty int vertex2\n"
+      "element camera 0\nproperty float f\nend_header\n" +
+          body);
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  const IndexedMesh mesh = read_mesh(dir / "extra.ply", options);
+  EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{{0, 1, 2}}));
+  ASSERT_EQ(told.size(), 1u);
+  // The empty camera element holds nothing to lose.
+  EXPECT_EQ(
+      told[0],
+      "not read, so no output keeps them (ocsimp reads triangles and their vertices' positions, normals, "
+      "colors and texture coordinates): vertex properties confidence, intensity; face properties red, "
+      "green, blue; element edge; texture file the skin.png");
+  // A long list is cut short.
+  std::string header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n";
+  std::string line;
+  for (int i = 0; i < 40; ++i) {
+    header += "property uchar p" + std::to_string(i) + "\n";
+    line += " 0";
+  }
+  header += "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  write_bytes(dir / "many.ply",
+              header + "0 0" + line + " 0\n1 0" + line + " 0\n0 1" + line + " 0\n3 0 1 2\n");
+  told.clear();
+  EXPECT_EQ(read_mesh(dir / "many.ply", options).positions[1], Vec3f(1, 0, 0));
+  ASSERT_EQ(told.size(), 1u);
+  EXPECT_NE(told[0].find("vertex properties p0, p1, p2, p3, p4, p5 and more"), std::string::npos) << told[0];
+  // Nothing to say of a file of positions, normals, colors and uvs only.
+  write_mesh(dir / "plain.ply", test::sphere(2));
+  told.clear();
+  read_mesh(dir / "plain.ply", options);
+  EXPECT_TRUE(told.empty()) << told[0];
+}
+
 TEST(PlyTypes, ColorsAsUcharWithoutAlphaGetOpaqueAlpha) {
   test::TempDir dir;
   write_bytes(
@@ -961,9 +1008,10 @@ TEST(PlyLayout, PerCornerTextureCoordinatesGoToTheirVertices) {
         ReadOptions options;
         options.warn = [&](const std::string& message) { told.push_back(message); };
         const IndexedMesh mesh = read_mesh(path, options);
-        // Vertices 0 and 2 are on the seam.
-        ASSERT_EQ(told.size(), 1u);
-        EXPECT_EQ(told[0].rfind("2 vertices on texture seams", 0), 0u) << told[0];
+        // The texture's number is not read, and vertices 0 and 2 are on the seam.
+        ASSERT_EQ(told.size(), 2u);
+        EXPECT_NE(told[0].find("face property texnumber"), std::string::npos) << told[0];
+        EXPECT_EQ(told[1].rfind("2 vertices on texture seams", 0), 0u) << told[1];
         EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{faces[0], faces[1]}));
         ASSERT_TRUE(mesh.has_uvs());
         EXPECT_EQ(mesh.uvs, expected);
@@ -976,13 +1024,14 @@ TEST(PlyLayout, PerCornerTextureCoordinatesGoToTheirVertices) {
         EXPECT_EQ(open_triangle_stream(path, sink)->attributes_left_out(), "texture coordinates");
         EXPECT_EQ(open_triangle_stream(path)->attributes_left_out(), "");
         // With split_corner_attributes every corner reads its own texcoord: vertices 0 and 2 get a copy
-        // each for the second triangle, and nothing is said. In batches of one triangle, the same.
-        told.clear();
+        // each for the second triangle, and nothing is said of seams. In batches of one triangle, the same.
         options.split_corner_attributes = true;
         for (const std::size_t capacity : {std::size_t{1}, TriangleBatch::default_capacity}) {
           options.batch_capacity = capacity;
+          told.clear();
           const IndexedMesh split = read_mesh(path, options);
-          EXPECT_TRUE(told.empty());
+          ASSERT_EQ(told.size(), 1u);
+          EXPECT_NE(told[0].find("face property texnumber"), std::string::npos) << told[0];
           ASSERT_EQ(split.vertex_count(), 7u);
           ASSERT_EQ(split.face_count(), 2u);
           for (int f = 0; f < 2; ++f) {
