@@ -662,6 +662,36 @@ TEST(Cli, AnErrorOnATerminalStartsItsOwnLine) {
   }
 }
 
+// The bar's line was about 90 characters whatever the terminal: on 80 columns it wrapped, and each redraw
+// ('\r' returns to the last row only) scrolled the screen a row.
+TEST(Cli, TheProgressBarFitsTheTerminal) {
+  if (std::system("command -v script >/dev/null 2>&1") != 0) GTEST_SKIP() << "no script(1) for a terminal";
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply", log = dir / "terminal.txt";
+  ASSERT_EQ(run("gen -q -o " + mesh + " --triangles 200000", dir).exit_code, 0);
+  for (int columns : {40, 60, 80}) {
+    std::string script = "script -qec 'stty cols " + std::to_string(columns) + "; ";
+    script.append(kOcsimp).append(" decimate --threads 1 " + mesh + " -o " + (dir / "out.ply") +
+                                  " --ratio 0.1");
+    script.append("' /dev/null > ").append(log).append(" 2>&1");
+    ASSERT_EQ(std::system(script.c_str()), 0) << script;
+    std::size_t bars = 0, longest = 0, start = 0;
+    const std::string text = file_bytes(log);
+    for (std::size_t i = 0; i <= text.size(); ++i) {
+      if (i == text.size() || text[i] == '\r' || text[i] == '\n') {
+        const std::string_view piece(text.data() + start, i - start);
+        if (piece.find("] ") != std::string_view::npos) {
+          ++bars;
+          longest = std::max(longest, piece.size());
+        }
+        start = i + 1;
+      }
+    }
+    EXPECT_GE(bars, 2u) << text;
+    EXPECT_LT(longest, static_cast<std::size_t>(columns)) << columns << " columns:\n" << text;
+  }
+}
+
 TEST(Cli, AnUnwritableDestinationFailsBeforeAnyOutput) {
   // A report in a missing folder, or a destination that is a folder, used to fail only at the end, after the
   // mesh had been written: the run failed and left its output.

@@ -1,4 +1,5 @@
 // What the commands share: the progress bar, timing, the summary table and JSON reports.
+#include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -6,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -38,20 +40,36 @@ struct ProgressBar {
     last_draw = now;
     const double seconds = std::chrono::duration<double>(now - phase_start).count();
     const double rate = seconds > 0 ? static_cast<double>(done) / seconds : 0.0;
+    // A line longer than the terminal wraps, and the next '\r' then returns only to its last row: every
+    // redraw scrolled a row on an 80-column terminal. So the bar narrows to fit, and the line is cut to the
+    // width if that is not enough; the width is asked each time, since the window may be resized.
+    std::size_t columns = 0;
+    winsize size{};
+    if (::ioctl(STDERR_FILENO, TIOCGWINSZ, &size) == 0) columns = size.ws_col;
     char line[160];
     if (total > 0) {
       const double fraction = std::min(1.0, static_cast<double>(done) / static_cast<double>(total));
-      char bar[31];
-      const int filled = static_cast<int>(fraction * 30);
-      for (int i = 0; i < 30; ++i) bar[i] = i < filled ? '#' : '.';
-      bar[30] = 0;
       const double left = rate > 0 ? static_cast<double>(total - std::min(done, total)) / rate : 0.0;
-      std::snprintf(line, sizeof line, "\r%-17s [%s] %5.1f%%  %s%s/s  %4.0fs left ", phase.c_str(), bar,
-                    100.0 * fraction, human(rate).c_str(), unit(phase), left);
+      char rest[96];
+      std::snprintf(rest, sizeof rest, " %5.1f%%  %s%s/s  %4.0fs left ", 100.0 * fraction,
+                    human(rate).c_str(), unit(phase), left);
+      // The widest the rest gets (human() gives at most 6 characters below 1000G, and 4 digits of seconds),
+      // so that the bar keeps its width from one redraw to the next.
+      const std::size_t others = std::max<std::size_t>(phase.size(), 17) + 3 +
+                                 std::strlen(" 100.0%  999.9k/s  9999s left ") + std::strlen(unit(phase));
+      const std::size_t width =
+          columns > others + 10 ? std::min<std::size_t>(30, columns - 1 - others) : std::size_t{10};
+      char bar[31];
+      const auto filled = static_cast<std::size_t>(fraction * static_cast<double>(width));
+      for (std::size_t i = 0; i < width; ++i) bar[i] = i < filled ? '#' : '.';
+      bar[width] = 0;
+      std::snprintf(line, sizeof line, "\r%-17s [%s]%s", phase.c_str(), bar, rest);
     } else {
       std::snprintf(line, sizeof line, "\r%-17s %s%s  %s%s/s ", phase.c_str(),
                     human(static_cast<double>(done)).c_str(), unit(phase), human(rate).c_str(), unit(phase));
     }
+    // Columns, plus the leading '\r', less one so the cursor stays on the row.
+    if (columns > 1 && std::strlen(line) > columns) line[columns] = 0;
     std::fputs(line, stderr);
     line_open = true;
     if (complete) finish_line();
