@@ -867,6 +867,40 @@ TEST(Cli, AFlagIsNotTakenForAnOutputFileName) {
   EXPECT_FALSE(file_bytes(after_o).empty());
 }
 
+// bench took its lists through CLI11, which dropped empty items and kept repeated ones: "--ratios 0.5,,0.5"
+// ran the target twice. bench and lod now read every list alike, and refuse both before reading the mesh.
+TEST(Cli, ListsRefuseEmptyAndRepeatedItems) {
+  test::TempDir dir;
+  const std::string mesh = dir / "in.ply";
+  write_mesh(mesh, test::sphere(3));
+  const std::string bench = "bench -q " + mesh + " --samples 100 ",
+                    lod = "lod -q " + mesh + " -o " + (dir / "l{faces}.ply") + " ";
+  const std::pair<std::string, std::string> cases[] = {
+      {bench + "--ratios 0.5,,0.25", "--ratios: '' is not a ratio"},
+      {bench + "--ratios 0.5,0.25,0.5", "--ratios: '0.5' is given twice"},
+      {bench + "--faces 100,", "--faces: '' is not a face count"},
+      {bench + "--faces 100,100", "--faces: '100' is given twice"},
+      {bench + "--faces 100 --methods decimate,decimate", "--methods: 'decimate' is given twice"},
+      {bench + "--faces 100 --methods ,decimate", "--methods: '' is not a name"},
+      {lod + "--faces 100,50,100", "--faces: '100' is given twice"},
+      {lod + "--ratios 0.5,,0.25", "--ratios: '' is not a ratio"}};
+  for (const auto& [command, message] : cases) {
+    const CommandResult r = run(command, dir);
+    EXPECT_EQ(r.exit_code, 2) << command;
+    EXPECT_NE(r.err.find(message), std::string::npos) << command << "\n" << r.err;
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_TRUE(r.out.empty()) << command << "\n" << r.out;
+  }
+  // What is well formed runs: one row per method and target.
+  const CommandResult ok = run(bench + "--ratios 0.5,0.25 --methods decimate,grid-quadric", dir);
+  ASSERT_EQ(ok.exit_code, 0) << ok.err;
+  std::size_t rows = 0;
+  for (std::size_t at = ok.out.find("\n| in |"); at != std::string::npos;
+       at = ok.out.find("\n| in |", at + 1))
+    ++rows;
+  EXPECT_EQ(rows, 4u) << ok.out;
+}
+
 // A summary printed after a report sent to standard output made it unreadable as JSON; simplify and lod
 // printed theirs only on a terminal, unlike decimate and cluster.
 TEST(Cli, AReportOnStandardOutputIsAllThatIsPrinted) {

@@ -25,26 +25,19 @@ void add_bench_command(CLI::App& app) {
       "table");
   struct Flags {
     std::string input, name, json, csv;
-    std::vector<std::uint64_t> faces;
-    std::vector<double> ratios;
-    std::vector<std::string> methods;
+    std::string faces, ratios, methods;
     BenchOptions options;
     int distance_threads = 0;
     bool quiet = false;
   };
   auto flags = std::make_shared<Flags>();
   cmd->add_option("input", flags->input, "The mesh (PLY, OBJ, STL or Draco)")->required();
-  auto* faces = cmd->add_option("--faces", flags->faces, "Face targets, comma-separated (e.g. 10000,2000)")
-                    ->delimiter(',')
-                    ->check(whole_number(1));
+  auto* faces = cmd->add_option("--faces", flags->faces, "Face targets, comma-separated (e.g. 10000,2000)");
   auto* ratios = cmd->add_option("--ratios", flags->ratios,
-                                 "Face targets as fractions of the input's faces (e.g. 0.1,0.02)")
-                     ->delimiter(',')
-                     ->check(fraction());
+                                 "Face targets as fractions of the input's faces (e.g. 0.1,0.02)");
   faces->excludes(ratios);
   cmd->add_option("--methods", flags->methods,
-                  "Methods, comma-separated (default: all of " + method_names + ")")
-      ->delimiter(',');
+                  "Methods, comma-separated (default: all of " + method_names + ")");
   cmd->add_option("--repeat", flags->options.repeat,
                   "Runs per method and target; the median time is reported")
       ->capture_default_str()
@@ -77,8 +70,16 @@ void add_bench_command(CLI::App& app) {
     // One would replace the other, silently.
     if (!flags->json.empty() && !flags->csv.empty() && same_file(flags->json, flags->csv))
       throw Error(flags->csv, {}, "--json and --csv name the same file");
+    // The lists are checked before the mesh is read.
+    const std::vector<std::uint64_t> faces =
+        flags->faces.empty() ? std::vector<std::uint64_t>{} : parse_face_list(flags->faces, "--faces");
+    const std::vector<double> ratios =
+        flags->ratios.empty() ? std::vector<double>{} : parse_ratio_list(flags->ratios, "--ratios");
     std::vector<BenchMethod> methods;
-    for (const std::string& name : flags->methods) methods.push_back(parse_bench_method(name));
+    if (!flags->methods.empty()) {
+      for (const std::string& name : parse_name_list(flags->methods, "--methods"))
+        methods.push_back(parse_bench_method(name));
+    }
     if (methods.empty()) methods = available_bench_methods();
 
     BenchInput input;
@@ -87,8 +88,8 @@ void add_bench_command(CLI::App& app) {
     input.mesh = read_mesh(flags->input);
     if (input.mesh.face_count() == 0) throw Error(flags->input, {}, "the mesh has no faces to simplify");
 
-    std::vector<std::uint64_t> targets = flags->faces;
-    for (double ratio : flags->ratios) targets.push_back(ratio_target(ratio, input.mesh.face_count()));
+    std::vector<std::uint64_t> targets = faces;
+    for (double ratio : ratios) targets.push_back(ratio_target(ratio, input.mesh.face_count()));
 
     BenchOptions options = flags->options;
     if (!flags->quiet) {
@@ -104,7 +105,7 @@ void add_bench_command(CLI::App& app) {
     }
     // The methods take their thread count from `options.threads`; this only limits the distance sampling.
     const auto limit = limit_threads(flags->distance_threads);
-    const std::vector<BenchResult> results = run_bench(input, methods, targets, flags->ratios, options);
+    const std::vector<BenchResult> results = run_bench(input, methods, targets, ratios, options);
 
     std::fputs(bench_markdown_table(results).c_str(), stdout);
     auto write_text = [](const std::string& path, const std::string& text) {

@@ -44,6 +44,12 @@ CLI::Validator thread_count();
 // A memory size parse_byte_size() takes, of at least one byte ("0" and "0.5" meant the default before).
 CLI::Validator byte_size();
 
+// Comma-separated lists for `flag` ("--faces", "--ratios", "--methods"): each item checked, none empty, none
+// given twice; throw Error naming the flag and the item.
+std::vector<std::uint64_t> parse_face_list(const std::string& text, const std::string& flag);
+std::vector<double> parse_ratio_list(const std::string& text, const std::string& flag);
+std::vector<std::string> parse_name_list(const std::string& text, const std::string& flag);
+
 // An output or report file name: not empty, and not a word that starts with '-' (a flag taken for the name).
 CLI::Validator file_name();
 

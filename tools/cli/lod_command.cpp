@@ -32,49 +32,6 @@ constexpr const char* kReportFields = R"(Report (--report FILE.json), one object
   phases              [{name, seconds, triangles_in, triangles_out, peak_rss_bytes}]: open, read or cluster,
                       then "level N" per level (decimating it and writing its file))";
 
-// A comma-separated list of levels for `flag`. `parse` reads an item as std::stoull and std::stod do (the
-// value, and the characters used), which must be the whole item and a value `valid` accepts; `expected` says
-// what an item must be.
-template <class T, class Parse, class Valid>
-std::vector<T> parse_levels(const std::string& text, const char* flag, const Parse& parse, const Valid& valid,
-                            const char* expected) {
-  std::vector<T> levels;
-  // Every comma separates two items, so "0.1," has an empty one, as ",0.1" does (getline dropped it).
-  for (std::size_t start = 0; start <= text.size();) {
-    const std::size_t comma = std::min(text.find(',', start), text.size());
-    const std::string item = text.substr(start, comma - start);
-    start = comma + 1;
-    T value{};
-    bool whole = false;
-    try {
-      std::size_t used = 0;
-      value = parse(item, &used);
-      whole = used != 0 && used == item.size();
-    } catch (const std::exception&) {
-    }
-    if (!whole || !valid(item, value)) {
-      throw Error(std::string(flag) + ": '" + item + "' is not " + expected);
-    }
-    levels.push_back(value);
-  }
-  if (levels.empty()) throw Error(std::string(flag) + ": no level given");
-  return levels;
-}
-
-std::vector<std::uint64_t> parse_face_levels(const std::string& text) {
-  return parse_levels<std::uint64_t>(
-      text, "--faces", [](const std::string& item, std::size_t* used) { return std::stoull(item, used); },
-      [](const std::string& item, std::uint64_t value) { return value > 0 && item[0] != '-'; },
-      "a face count (give positive integers separated by commas)");
-}
-
-std::vector<double> parse_ratio_levels(const std::string& text) {
-  return parse_levels<double>(
-      text, "--ratios", [](const std::string& item, std::size_t* used) { return std::stod(item, used); },
-      [](const std::string&, double value) { return value > 0 && value <= 1; },
-      "a ratio of the input's faces (give numbers in (0, 1] separated by commas)");
-}
-
 }  // namespace
 
 void add_lod_command(CLI::App& app) {
@@ -127,8 +84,8 @@ void add_lod_command(CLI::App& app) {
     const auto limit = limit_threads(options.threads);
     if (flags->faces.empty() == flags->ratios.empty())
       throw Error("lod needs its levels: --faces N,M,... or --ratios R,S,...");
-    if (!flags->faces.empty()) options.level_faces = parse_face_levels(flags->faces);
-    if (!flags->ratios.empty()) options.level_ratios = parse_ratio_levels(flags->ratios);
+    if (!flags->faces.empty()) options.level_faces = parse_face_list(flags->faces, "--faces");
+    if (!flags->ratios.empty()) options.level_ratios = parse_ratio_list(flags->ratios, "--ratios");
     const bool several = options.level_faces.size() + options.level_ratios.size() > 1;
     // The levels' files may not replace the input (a pattern such as in_{faces}.ply easily names it), nor may
     // the report replace a level. Checked before anything is read for counts; a ratio's file is named only
