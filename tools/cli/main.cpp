@@ -34,7 +34,18 @@ int main(int argc, char** argv) {
     std::string help = "ocsimp";
     const std::vector<CLI::App*> used = top->get_subcommands();
     if (!used.empty()) help += " " + used.front()->get_name();
-    return "ocsimp: " + std::string(e.what()) + " (see " + help + " --help)\n";
+    std::string message = e.what();
+    // CLI11 2.1 lists unexpected arguments last first ("not expected: c b a"): they are listed again here
+    // in the order they were given.
+    if (dynamic_cast<const CLI::ExtrasError*>(&e) != nullptr) {
+      const std::vector<std::string> extras = (used.empty() ? top : used.front())->remaining();
+      if (!extras.empty()) {
+        message = extras.size() > 1 ? "The following arguments were not expected:"
+                                    : "The following argument was not expected:";
+        for (const std::string& extra : extras) message += " " + extra;
+      }
+    }
+    return "ocsimp: " + message + " (see " + help + " --help)\n";
   });
   // CLI11 reports a misspelt command as a missing one.
   const std::string first = argc > 1 ? argv[1] : "";
