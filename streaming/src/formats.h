@@ -68,7 +68,8 @@ inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint
   if (uv_seam_vertices > 0) {
     note =
         vertices(uv_seam_vertices, "on texture seams (face corners giving different texture coordinates)") +
-        " first corner's in this command (convert, decimate, simplify and lod keep a vertex per side)";
+        " first corner's in this command (convert keeps a vertex per side, as decimate, simplify and lod do "
+        "without --no-weld)";
   }
   if (hard_edge_vertices > 0) {
     note += (note.empty() ? "" : "; ") +

@@ -141,9 +141,9 @@ TEST(Obj, SaysHowManyVerticesItsCornersDisagreeOn) {
   EXPECT_EQ(
       told[0],
       "3 vertices on texture seams (face corners giving different texture coordinates) keep their first "
-      "corner's in this command (convert, decimate, simplify and lod keep a vertex per side); 1 vertex on "
-      "hard edges (face corners giving "
-      "different normals) keeps its first corner's normal");
+      "corner's in this command (convert keeps a vertex per side, as decimate, simplify and lod do without "
+      "--no-weld); 1 vertex on hard edges (face corners giving different normals) keeps its first corner's "
+      "normal");
   told.clear();
   test::write_file_bytes(dir / "agreeing.obj",
                          "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0 0\n"

@@ -1291,8 +1291,8 @@ TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
   const std::string smears =
       "ocsimp: warning: " + obj +
       ": 1 vertex on texture seams (face corners giving different texture coordinates) "
-      "keeps its first corner's in this command (convert, decimate, simplify and lod keep a vertex per "
-      "side)\n";
+      "keeps its first corner's in this command (convert keeps a vertex per side, as decimate, simplify and "
+      "lod do without --no-weld)\n";
   const std::vector<std::string> decimating = {"decimate -q " + obj + " -o " + (dir / "d.ply") + " --faces 1",
                                                "simplify -q " + obj + " -o " + (dir / "s.ply") + " --faces 1",
                                                "lod -q " + obj + " -o " + (dir / "l.ply") + " --faces 1"};
