@@ -624,6 +624,22 @@ TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
   EXPECT_EQ(o.exit_code, 0) << o.err;
   EXPECT_EQ(o.err.find("span"), std::string::npos) << o.err;
   EXPECT_NE(o.err.find("has no faces"), std::string::npos) << o.err;
+  // A target the finest grid cannot reach, for the same reason: the warning names the input and the cause.
+  const std::string sphere = dir / "sphere.ply";
+  IndexedMesh far = test::sphere(3);
+  write_mesh(sphere, far);
+  far.positions.push_back(Vec3f(1e6f, 1e6f, 1e6f));
+  write_mesh(stretched, far);
+  for (const std::string& target : {std::string("--octree --vertices 200"), std::string("--faces 400")}) {
+    const CommandResult t = run("cluster -q " + stretched + " -o " + result + " " + target, dir);
+    EXPECT_EQ(t.exit_code, 0) << t.err;
+    EXPECT_NE(t.err.find(stretched + ": the "), std::string::npos) << t.err;
+    EXPECT_NE(t.err.find("target was not reached"), std::string::npos) << t.err;
+    EXPECT_NE(t.err.find("vertices no face uses stretch the box"), std::string::npos) << t.err;
+    const CommandResult u = run("cluster -q " + sphere + " -o " + result + " " + target, dir);
+    EXPECT_EQ(u.exit_code, 0) << u.err;
+    EXPECT_TRUE(u.err.empty()) << u.err;
+  }
 }
 
 TEST(Cli, FailedConvertLeavesNothingBehind) {
