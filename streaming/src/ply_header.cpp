@@ -1,6 +1,5 @@
 #include "ply_header.h"
 
-#include <algorithm>
 #include <cstring>
 #include <string>
 #include <unordered_set>
@@ -73,9 +72,7 @@ class HeaderParser {
           // The name is the rest of the line, which may hold blanks.
           std::string name(line.substr(static_cast<std::size_t>(words[2].data() - line.data())));
           name.erase(name.find_last_not_of(" \t\r") + 1);
-          if (std::find(header.texture_files.begin(), header.texture_files.end(), name) ==
-              header.texture_files.end())
-            header.texture_files.push_back(std::move(name));
+          header.texture_files.push_back(std::move(name));
         }
         continue;
       }

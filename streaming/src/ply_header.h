@@ -55,7 +55,7 @@ struct PlyHeader {
   std::vector<PlyElement> elements;
   std::uint64_t data_offset = 0;  // byte just past the end_header line
   std::uint64_t data_line = 0;    // number of the first line after end_header (ascii)
-  // The images named by "comment TextureFile NAME" lines (MeshLab's and VCG's convention), each once.
+  // The images named by "comment TextureFile NAME" lines (MeshLab's and VCG's convention).
   std::vector<std::string> texture_files;
 };
 
