@@ -635,7 +635,7 @@ TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
     EXPECT_EQ(t.exit_code, 0) << t.err;
     EXPECT_NE(t.err.find(stretched + ": the "), std::string::npos) << t.err;
     EXPECT_NE(t.err.find("target was not reached"), std::string::npos) << t.err;
-    EXPECT_NE(t.err.find("vertices no face uses stretch the box"), std::string::npos) << t.err;
+    EXPECT_NE(t.err.find("vertices no face uses stretch the bounding box"), std::string::npos) << t.err;
     const CommandResult u = run("cluster -q " + sphere + " -o " + result + " " + target, dir);
     EXPECT_EQ(u.exit_code, 0) << u.err;
     EXPECT_TRUE(u.err.empty()) << u.err;

@@ -158,29 +158,28 @@ void add_cluster_command(CLI::App& app) {
       report["peak_rss_bytes"] = peak_rss_bytes();
       write_json_report(flags->report, report);
     }
-    // A --grid counts cells along the bounding box of every vertex, used or not (the box is known before the
-    // faces are read); an outlier no face uses made bunny --grid 100 a single cell, without a word. Compared
-    // with the grid the pass used, not the one asked for: a box of one point is a single cell whatever the
-    // --grid, and no vertex stretches it.
-    if (options.grid > 0 && !(options.cell_size > 0) && !options.octree && options.target_faces == 0 &&
-        2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid) {
-      std::fprintf(stderr,
-                   "ocsimp: warning: the faces span only %u of the %u cells of %s %u: vertices no face "
-                   "uses stretch the bounding box; --cell-size sets the cells' size directly\n",
-                   stats.spanned_cells, options.grid, grid->count() > 0 ? "--grid" : "the default --grid",
-                   options.grid);
+    // A grid spans the bounding box of every vertex, used or not (the box is known before the faces are
+    // read): an outlier no face uses left the faces in a few cells, bunny --grid 100 a single one without a
+    // word, and a far one keeps even the finest grid (2^21 cells along the box) from a target. Compared with
+    // the grid the pass used, not the one asked for: a box of one point is a single cell whatever the --grid,
+    // and no vertex stretches it; parts far apart span the box, and get no such hint either.
+    const bool stretched = 2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid;
+    const std::string stretch = std::string("vertices no face uses stretch the bounding box") +
+                                (options.octree ? "" : "; --cell-size sets the cells' size directly");
+    if (stretched && options.grid > 0 && !(options.cell_size > 0) && !options.octree &&
+        options.target_faces == 0) {
+      console.warn("the faces span only " + std::to_string(stats.spanned_cells) + " of the " +
+                   std::to_string(options.grid) + " cells of " +
+                   (grid->count() > 0 ? "--grid " : "the default --grid ") + std::to_string(options.grid) +
+                   ": " + stretch);
     }
     if (!stats.target_met) {
       std::string note = std::string("the ") + (flags->vertices ? "vertex" : "face") +
                          " target was not reached (the finest grid has " + std::to_string(stats.fine_cells) +
                          " cells";
-      // The finest grid is finite (2^21 cells along the box): an outlier no face uses, far off, leaves
-      // the faces in a few of them. Parts far apart span the box, and get no such hint.
-      if (2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid) {
+      if (stretched) {
         note += ", and the faces span only " + std::to_string(stats.spanned_cells) + " of its " +
-                std::to_string(stats.fine_grid) +
-                " along the bounding box: vertices no face uses stretch the box";
-        if (!options.octree) note += "; --cell-size sets the cells' size directly";
+                std::to_string(stats.fine_grid) + " along the box: " + stretch;
       }
       console.warn(note + ")");
     }
