@@ -954,6 +954,38 @@ TEST(Cli, AFailedWriteToStandardOutputIsAnError) {
   }
 }
 
+// A run whose summary or report could not be written failed (exit 2), and a failed run leaves no output:
+// decimate, simplify, cluster and gen left their mesh behind, with the report at /dev/full or the summary
+// on a full disk.
+TEST(Cli, AnUnwrittenSummaryOrReportLeavesNoMesh) {
+  test::TempDir dir;
+  const std::string mesh = dir / "square.ply", out = dir / "out.ply", err = dir / "stderr.txt";
+  write_mesh(mesh, test::grid_square(8));
+  const std::string mesh_commands[] = {"decimate " + mesh + " --faces 20", "simplify " + mesh + " --faces 20",
+                                       "cluster " + mesh + " --grid 4", "gen --triangles 1000"};
+  for (const std::string& command : mesh_commands) {
+    for (const char* failing : {" >/dev/full", " --report /dev/full >/dev/null"}) {
+      if (command.rfind("gen", 0) == 0 && std::string(failing).find("--report") != std::string::npos)
+        continue;
+      const std::string line = kOcsimp + " " + command + " -o " + out + failing + " 2>" + err;
+      const int status = std::system(line.c_str());
+      ASSERT_TRUE(WIFEXITED(status)) << line;
+      EXPECT_EQ(WEXITSTATUS(status), 2) << line;
+      EXPECT_EQ(lines(file_bytes(err)), 1u) << line << "\n" << file_bytes(err);
+      EXPECT_FALSE(std::filesystem::exists(out)) << line;
+    }
+  }
+  // lod's levels, and compare's report, likewise.
+  const std::string level = dir / "level_{faces}.ply", report = dir / "report.json";
+  for (const std::string& command : {"lod " + mesh + " -o " + level + " --faces 40,20",
+                                     "compare " + mesh + " " + mesh + " --report " + report}) {
+    const int status = std::system((kOcsimp + " " + command + " >/dev/full 2>" + err).c_str());
+    ASSERT_TRUE(WIFEXITED(status)) << command;
+    EXPECT_EQ(WEXITSTATUS(status), 2) << command;
+    EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path), {}), 2) << command;  // mesh, err
+  }
+}
+
 // Killed while it writes, by a signal it can catch or by SIGKILL (as the out-of-memory killer does), gen
 // leaves the folder as it was: its output is an unnamed file until it is complete.
 TEST(Cli, InterruptedGenLeavesNoFile) {

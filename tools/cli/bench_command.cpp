@@ -108,6 +108,7 @@ void add_bench_command(CLI::App& app) {
     const std::vector<BenchResult> results = run_bench(input, methods, targets, ratios, options);
 
     std::fputs(bench_markdown_table(results).c_str(), stdout);
+    HeldCommits held;  // both files appear once the table is out (see publish)
     auto write_text = [](const std::string& path, const std::string& text) {
       AtomicFile file(path);
       file.write(text);
@@ -115,6 +116,7 @@ void add_bench_command(CLI::App& app) {
     };
     if (!flags->json.empty()) write_text(flags->json, bench_json(results, options));
     if (!flags->csv.empty()) write_text(flags->csv, bench_csv(results));
+    publish(held);
   });
 }
 

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -420,6 +421,20 @@ void write_json_report(const std::string& path, const nlohmann::json& report) {
   file.write(json_text(report));
   file.write("\n");
   file.commit();
+}
+
+void flush_standard_output() {
+  errno = 0;
+  const bool flushed = std::fflush(stdout) == 0;
+  if (!flushed || std::ferror(stdout)) {
+    throw Error("standard output: write failed: " +
+                std::string(errno != 0 ? std::strerror(errno) : "an earlier write did not complete"));
+  }
+}
+
+void publish(HeldCommits& held) {
+  flush_standard_output();
+  held.release();
 }
 
 }  // namespace ocsimp::cli

@@ -107,7 +107,8 @@ void add_cluster_command(CLI::App& app) {
     // collapsed".
     if (stats.input_triangles == 0) throw Error(flags->input, {}, "the mesh has no faces");
     const std::uint64_t input_bytes = stream->bytes_total();
-    stream.reset();  // its vertex array is scratch now; free it before writing
+    stream.reset();    // its vertex array is scratch now; free it before writing
+    HeldCommits held;  // the mesh appears once the report and summary are out (see publish)
     const auto write_start = std::chrono::steady_clock::now();
     WriteOptions write;
     write.ascii = flags->ascii;
@@ -192,6 +193,7 @@ void add_cluster_command(CLI::App& app) {
           static_cast<unsigned long long>(stats.fine_cells), total_seconds,
           format_bytes(peak_rss_bytes()).c_str());
     }
+    publish(held);
   });
 }
 

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "ocsimp/core/system.h"
+#include "ocsimp/streaming/atomic_file.h"
 #include "ocsimp/streaming/io.h"
 #include "ocsimp/tools/pipeline.h"
 
@@ -111,6 +112,12 @@ std::string json_text(const nlohmann::json& value);
 
 // Writes `report` as pretty JSON (json_text) to `path`, atomically.
 void write_json_report(const std::string& path, const nlohmann::json& report);
+
+// Flushes standard output; throws Error when anything written to it was lost (a full disk, a closed pipe).
+void flush_standard_output();
+// Ends a command that writes files under `held`: once its summary has gone out, the files appear together.
+// A summary or report that could not be written fails the run, which then leaves no output behind.
+void publish(HeldCommits& held);
 
 double seconds_since(std::chrono::steady_clock::time_point start);
 

@@ -124,6 +124,7 @@ void add_compare_command(CLI::App& app) {
     out["rms_percent"] = d.percent(d.rms);
     out["forward"] = one_sided_json(d.forward, d);
     out["backward"] = one_sided_json(d.backward, d);
+    HeldCommits held;  // the report appears once the table is out (see publish)
     if (!flags->report.empty()) {
       nlohmann::json report = out;
       report["seconds"] = seconds;
@@ -131,9 +132,13 @@ void add_compare_command(CLI::App& app) {
       write_json_report(flags->report, report);
     }
     // The report is then the output: the table, or --json's copy of the same fields, would follow it.
-    if (is_standard_output(flags->report)) return;
+    if (is_standard_output(flags->report)) {
+      publish(held);
+      return;
+    }
     if (flags->json) {
       std::printf("%s\n", json_text(out).c_str());
+      publish(held);
       return;
     }
     std::printf("original    %s: %zu vertices, %zu faces, bounding-box diagonal %g\n",
@@ -152,6 +157,7 @@ void add_compare_command(CLI::App& app) {
         "\nforward: from the original's surface to the simplified one; backward: the reverse. Symmetric: max "
         "of the\nHausdorff distances, average of the means, RMS = sqrt((forward^2 + backward^2) / 2).\n");
     if (!flags->quiet) std::fprintf(stderr, "measured in %.2f s\n", seconds);
+    publish(held);
   });
 }
 

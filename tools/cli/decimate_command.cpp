@@ -113,6 +113,7 @@ void add_decimate_command(CLI::App& app) {
     DecimateResult result = decimate(std::move(input), options);
     const double decimate_seconds = seconds_since(decimate_start);
     check_input_faces(flags->input, console.warn, options.weld, result.stats);
+    HeldCommits held;  // the mesh appears once the report and summary are out (see publish)
     const auto write_start = std::chrono::steady_clock::now();
     WriteOptions write;
     write.ascii = flags->ascii;
@@ -183,6 +184,7 @@ void add_decimate_command(CLI::App& app) {
           stop_name(s.stop), total_seconds, decimate_seconds, s.max_error,
           format_bytes(peak_rss_bytes()).c_str());
     }
+    publish(held);
   });
 }
 

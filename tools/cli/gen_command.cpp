@@ -54,6 +54,7 @@ void add_gen_command(CLI::App& app) {
     GenerateOptions options = flags->options;  // a copy, as in convert: the bar ends with the command
     options.progress = make_progress(flags->quiet);
     GeneratedCounts counts;
+    HeldCommits held;  // the mesh appears once the summary is out (see publish)
     if (check_mesh_destination(flags->output) == FileFormat::ply) {
       counts = generate_scan_ply(flags->output, options);
     } else {
@@ -69,6 +70,7 @@ void add_gen_command(CLI::App& app) {
                   static_cast<unsigned long long>(counts.vertices),
                   static_cast<unsigned long long>(counts.faces), seconds);
     }
+    publish(held);
   });
 }
 

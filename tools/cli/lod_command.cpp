@@ -120,7 +120,7 @@ void add_lod_command(CLI::App& app) {
       write_result(files.back(), mesh, write);
     };
     // The levels and the report appear together once all are written: a run that fails or is interrupted
-    // part way leaves none, rather than a few levels beside stale ones from an earlier run.
+    // part way leaves none, rather than a few levels beside stale ones from an earlier run (see publish).
     HeldCommits held;
     const auto start = std::chrono::steady_clock::now();
     const LodResult result = lod(flags->input, options);
@@ -159,7 +159,6 @@ void add_lod_command(CLI::App& app) {
       report["phases"] = phases_json(result.phases);
       write_json_report(flags->report, report);
     }
-    held.release();
     for (const LodLevel& level : result.levels) {
       if (!level.decimate.target_reached && !level.decimate.reason.empty()) {
         std::fprintf(stderr, "ocsimp: warning: level %llu: %s\n",
@@ -185,6 +184,7 @@ void add_lod_command(CLI::App& app) {
           result.out_of_core ? ", vertices dereferenced on disk" : "",
           format_bytes(peak_rss_bytes()).c_str());
     }
+    publish(held);
   });
 }
 

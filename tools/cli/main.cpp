@@ -1,8 +1,6 @@
 // ocsimp: simplify triangle meshes of any size. One subcommand per file in this folder.
-#include <cerrno>
 #include <csignal>
 #include <cstdio>
-#include <cstring>
 #include <exception>
 #include <string>
 #include <vector>
@@ -83,11 +81,10 @@ int main(int argc, char** argv) {
   }
   // What info --json, compare and bench print goes to standard output: on a full disk, or with it closed,
   // that output is lost, which is a failed write like any other rather than a success.
-  errno = 0;
-  const bool flushed = std::fflush(stdout) == 0;
-  if (!flushed || std::ferror(stdout)) {
-    std::fprintf(stderr, "ocsimp: standard output: write failed: %s\n",
-                 errno != 0 ? std::strerror(errno) : "an earlier write did not complete");
+  try {
+    ocsimp::cli::flush_standard_output();
+  } catch (const ocsimp::Error& e) {
+    std::fprintf(stderr, "ocsimp: %s\n", e.what());
     return 2;
   }
   return 0;

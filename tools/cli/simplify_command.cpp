@@ -102,6 +102,7 @@ void add_simplify_command(CLI::App& app) {
     options.warn = console.warn;
     const auto start = std::chrono::steady_clock::now();
     SimplifyResult result = simplify(flags->input, options);
+    HeldCommits held;  // the mesh appears once the report and summary are out (see publish)
     const auto write_start = std::chrono::steady_clock::now();
     WriteOptions write;
     write.ascii = flags->ascii;
@@ -149,6 +150,7 @@ void add_simplify_command(CLI::App& app) {
           result.out_of_core ? ", vertices dereferenced on disk" : "",
           format_bytes(peak_rss_bytes()).c_str());
     }
+    publish(held);
   });
 }
 
