@@ -439,6 +439,46 @@ TEST(Pipeline, TwoStageReachesTheTargetOnPartsFarApart) {
   }
 }
 
+TEST(Pipeline, AClusteringThatLosesTheFacesGivesWayToDecimatingInCore) {
+  // A wavy strip, 1000 long and 0.01 wide: a grid with the cells the target asks for has cells wider than
+  // the strip, where every face collapses. Under a memory limit that called for clustering, the result had
+  // no face at all.
+  test::TempDir dir;
+  IndexedMesh strip;
+  const Index along = 2'000, across = 3;
+  for (Index i = 0; i < along; ++i) {
+    const float x = 1000.0f * static_cast<float>(i) / static_cast<float>(along - 1);
+    for (Index j = 0; j < across; ++j)
+      strip.positions.push_back({x, 0.005f * static_cast<float>(j), std::sin(x / 50)});
+  }
+  for (Index i = 0; i + 1 < along; ++i) {
+    for (Index j = 0; j + 1 < across; ++j) {
+      const Index a = i * across + j, b = a + across;
+      strip.triangles.push_back({a, b, b + 1});
+      strip.triangles.push_back({a, b + 1, a + 1});
+    }
+  }
+  const std::string path = dir / "strip.ply";
+  write_mesh(path, strip);
+  SimplifyOptions options;
+  options.target_faces = 800;
+  options.memory_limit = 1 << 20;
+  std::vector<std::string> warnings;
+  options.warn = [&](const std::string& w) { warnings.push_back(w); };
+  const SimplifyResult result = simplify(path, options);
+  EXPECT_FALSE(result.clustered);
+  EXPECT_EQ(result.mesh.face_count(), 800u) << result.decimate.reason;
+  EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("clustering kept 0 faces") != std::string::npos;
+  }));
+  // The whole strip is still there, and nowhere off it.
+  const Box3 box = result.mesh.bounds();
+  EXPECT_LT(box.lo.x(), 1.0f);
+  EXPECT_GT(box.hi.x(), 999.0f);
+  EXPECT_GE(box.lo.y(), -1e-4f);
+  EXPECT_LE(box.hi.y(), 0.0101f);
+}
+
 TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
   // Out of core the intermediate is clustered to a size, not to an error: --max-error 0 let no collapse
   // through, yet the output was the clustered intermediate, reported with a max_error of 0 and the target

@@ -247,7 +247,18 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const double in_core_peak = process_bytes + in_core_bytes;
   const bool may_decimate_directly = (!options.two_stage || whole_input) && !stage.out_of_core;
   const bool in_core = may_decimate_directly && (in_core_bytes <= budget || in_core_peak < expected_peak);
-  // Reads the whole input for the decimator; `cluster_peak`: what clustering first was expected to take.
+  // Reads the whole input for the decimator.
+  auto read_all = [&] {
+    start = Clock::now();
+    stage.mesh.mesh = read_mesh(*stream);
+    stream.reset();
+    stage.input_faces = stage.mesh.mesh.face_count();
+    stage.phases.push_back(
+        {"read", seconds_since(start), stage.input_faces, stage.input_faces, peak_rss_bytes()});
+    stage.target_faces = options.target_faces;
+    stage.target_ratio = options.target_ratio;
+  };
+  // The same, instead of clustering; `cluster_peak`: what clustering first was expected to take.
   auto read_whole = [&](double cluster_peak) {
     stage.memory_needed = 0;
     if (in_core_bytes > budget) {
@@ -259,14 +270,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
                      format_bytes(static_cast<std::uint64_t>(cluster_peak)) + ")");
       }
     }
-    start = Clock::now();
-    stage.mesh.mesh = read_mesh(*stream);
-    stream.reset();
-    stage.input_faces = stage.mesh.mesh.face_count();
-    stage.phases.push_back(
-        {"read", seconds_since(start), stage.input_faces, stage.input_faces, peak_rss_bytes()});
-    stage.target_faces = options.target_faces;
-    stage.target_ratio = options.target_ratio;
+    read_all();
   };
   if (in_core) {
     read_whole(expected_peak);
@@ -337,9 +341,39 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // The in-memory path's reader refuses such a file; the streaming one only knows once the pass is done.
   if (stage.cluster.input_triangles == 0) throw Error(stream->path(), {}, "the mesh has no faces");
   stream.reset();
+  // Cells keep no face across a part thinner than they are: a 1000 x 0.01 strip of 8,000 faces clustered to
+  // none for a target of 800, its finest grid short of its target, and the decimator could not then reach
+  // its own. (An octree that met its target, the largest count it reaches not above it, did its part.) The
+  // target comes first, as for a limit too small for any intermediate: the input is read again, whole, and
+  // decimated in core over the limit, when the process can have that memory (with its vertices on disk, the
+  // input is too large).
+  const std::uint64_t clustered_faces = stage.mesh.mesh.face_count();
+  const std::uint64_t final_target = count_target(options, stage.cluster.input_triangles);
+  const double whole_peak =
+      process_bytes + vertex_bytes + kInCoreBytesPerFace * static_cast<double>(stage.cluster.input_triangles);
+  if (!stage.cluster.target_met && final_target > 0 && clustered_faces < final_target &&
+      stage.cluster.input_triangles > final_target && !stage.out_of_core &&
+      whole_peak <= static_cast<double>(physical_memory_bytes())) {
+    const bool over = whole_peak > budget;
+    stage.memory_needed = over ? static_cast<std::uint64_t>(whole_peak) : 0;
+    if (options.warn) {
+      options.warn("clustering kept " + std::to_string(clustered_faces) + " faces, under the target of " +
+                   std::to_string(final_target) +
+                   " (a face whose corners share a cell collapses, and thin or small parts lose all theirs): "
+                   "reading the input again to decimate it in core, which is expected to take about " +
+                   format_bytes(static_cast<std::uint64_t>(whole_peak)) +
+                   (over ? ", over the memory limit of " + format_bytes(stage.memory_limit) : std::string()));
+    }
+    stage.mesh = {};
+    stage.cluster = {};
+    read.warn = {};  // what the first read had to say is said
+    stream = open_triangle_stream(input_path, read);
+    read_all();
+    return stage;
+  }
   stage.clustered = true;
   stage.input_faces = stage.cluster.input_triangles;
-  stage.intermediate_faces = stage.mesh.mesh.face_count();
+  stage.intermediate_faces = clustered_faces;
   stage.phases.push_back(
       {"cluster", seconds_since(start), stage.input_faces, stage.intermediate_faces, peak_rss_bytes()});
   stage.target_faces = count_target(options, stage.input_faces);
