@@ -586,6 +586,35 @@ TEST(Cli, ClusterRefusesAnInputWithoutFaces) {
 
 // --grid counts cells along the box of every vertex; one no face uses, far away, made the whole mesh a
 // single cell, and the run said nothing.
+// A face target missed with cells to spare (a strip thinner than the cells the target asks for) was
+// reported as "the finest grid has 2001 cells", when --cell-size could go much finer.
+TEST(Cli, ClusterSaysWhenThinPartsLoseTheirFaces) {
+  test::TempDir dir;
+  IndexedMesh strip;
+  for (Index i = 0; i < 2'000; ++i) {
+    const float x = static_cast<float>(i) / 2.0f;
+    strip.positions.insert(strip.positions.end(), {{x, 0, 0}, {x, 0.01f, 0}});
+    if (i > 0) {
+      strip.triangles.push_back({2 * i - 2, 2 * i, 2 * i + 1});
+      strip.triangles.push_back({2 * i - 2, 2 * i + 1, 2 * i - 1});
+    }
+  }
+  const std::string in = dir / "strip.ply", out = dir / "out.ply";
+  write_mesh(in, strip);
+  const CommandResult r = run("cluster -q " + in + " -o " + out + " --faces 400", dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  ReadOptions faceless;
+  faceless.faces_required = false;
+  EXPECT_LT(read_mesh(out, faceless).face_count(), 400u);
+  EXPECT_NE(r.err.find(in + ": the face target was not reached: the fine grid's "), std::string::npos)
+      << r.err;
+  EXPECT_NE(r.err.find("--cell-size or --grid sets smaller cells"), std::string::npos) << r.err;
+  // As it says: cells narrower than the strip keep its faces.
+  const CommandResult fine = run("cluster -q " + in + " -o " + out + " --cell-size 0.004", dir);
+  EXPECT_EQ(fine.exit_code, 0) << fine.err;
+  EXPECT_GT(read_mesh(out).face_count(), 400u);
+}
+
 TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
   test::TempDir dir;
   IndexedMesh mesh = test::grid_square(16);  // the unit square
