@@ -514,6 +514,23 @@ TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
   EXPECT_EQ(in_core.max_error(), in_core.decimate.max_error);
 }
 
+TEST(Pipeline, TwoStageWithAnErrorBoundAloneClusters) {
+  // Without a count, the intermediate was as large as the memory budget allows, so every input that fit
+  // was decimated directly and --two-stage did nothing, without a word.
+  test::TempDir dir;
+  const std::string path = write_scan(dir, 300'000);
+  SimplifyOptions options;
+  options.max_error = 1e-3;
+  options.two_stage = true;
+  const SimplifyResult result = simplify(path, options);
+  EXPECT_TRUE(result.clustered);
+  EXPECT_GT(result.intermediate_faces, 200'000u);
+  EXPECT_LT(result.intermediate_faces, 300'000u);
+  EXPECT_TRUE(result.decimate.target_reached) << result.decimate.reason;
+  EXPECT_LE(result.max_error(), options.max_error);
+  EXPECT_LT(result.mesh.face_count(), result.intermediate_faces);
+}
+
 TEST(Lod, LevelsComeOutInTheRequestedCountsLargestFirst) {
   test::TempDir dir;
   const std::string path = write_scan(dir, 60'000, 2);

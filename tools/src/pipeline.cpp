@@ -216,7 +216,12 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     // overflowed, and the octree was then asked for its minimum of 4 faces.
     intermediate_faces = static_cast<std::uint64_t>(std::min(faces, static_cast<double>(faces_hint)));
   } else {
-    intermediate_faces = static_cast<std::uint64_t>(std::max(room, 1000.0));
+    // An error bound alone: as large as the budget allows, which leaves the clustering stage the least
+    // error. --two-stage asks for the stage where the input fits, which that size would leave out; it gets
+    // the size a count target gets at least.
+    double faces = std::max(room, 1000.0);
+    if (options.two_stage && options.intermediate == 0) faces = std::min(faces, kMinIntermediate);
+    intermediate_faces = static_cast<std::uint64_t>(faces);
   }
   const double in_core_bytes = vertex_bytes + kInCoreBytesPerFace * static_cast<double>(faces_hint);
   // Clustering to an intermediate at least as large as the input merges nothing, and its quadrics, rebuilt
