@@ -1164,6 +1164,21 @@ TEST(Cli, LodRefusesALevelFileThatWouldReplaceItsInput) {
   EXPECT_EQ(file_bytes(input), before);
 }
 
+// Two levels whose files are one (a symbolic link from one level's name to another's): the run went through
+// and the file held the smaller level, the larger one lost without a word.
+TEST(Cli, LodRefusesTwoLevelsInOneFile) {
+  test::TempDir dir;
+  const std::string mesh = dir / "square.ply";
+  write_mesh(mesh, test::grid_square(16));
+  std::ofstream(dir / "x_100.ply") << "old";
+  std::filesystem::create_symlink("x_100.ply", dir / "x_50.ply");
+  const CommandResult r = run("lod " + mesh + " -o '" + (dir / "x_{faces}.ply") + "' --faces 100,50", dir);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lines(r.err), 1u) << r.err;
+  EXPECT_NE(r.err.find("x_50.ply: this level's file is also the level file"), std::string::npos) << r.err;
+  EXPECT_EQ(file_bytes(dir / "x_100.ply"), "old");
+}
+
 TEST(Cli, LodRefusesAPatternWithoutFacesForSeveralLevels) {
   test::TempDir dir;
   const std::string scan = dir / "scan.ply";

@@ -93,8 +93,15 @@ void add_lod_command(CLI::App& app) {
     auto check_level_files = [flags, several](const std::vector<std::uint64_t>& levels) {
       std::vector<std::string> meshes{flags->input};
       for (std::uint64_t faces : levels) {
-        meshes.push_back(lod_level_path(flags->output, faces, several));
-        check_mesh_destination(meshes.back(), flags->input);
+        const std::string path = lod_level_path(flags->output, faces, several);
+        check_mesh_destination(path, flags->input);
+        // Two names of one file (a symbolic link to another level's) would leave one level of the two.
+        for (std::size_t i = 1; i < meshes.size(); ++i) {
+          if (same_file(path, meshes[i])) {
+            throw Error(path, {}, "this level's file is also the level file " + meshes[i]);
+          }
+        }
+        meshes.push_back(path);
       }
       if (!flags->report.empty()) check_report_destination(flags->report, meshes);
     };
