@@ -153,7 +153,7 @@ TEST(BenchMethods, TablesHaveARowPerMethodAndTarget) {
   while (std::getline(table, line)) rows.push_back(line);
   ASSERT_EQ(rows.size(), 2 + results.size());
   EXPECT_EQ(rows[0].rfind(
-                "| mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag | peak MB |", 0),
+                "| mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag | peak MiB |", 0),
             0u);
   std::map<std::pair<std::string, std::string>, int> seen;
   for (std::size_t i = 2; i < rows.size(); ++i) {

@@ -358,7 +358,7 @@ std::vector<BenchResult> run_bench(const BenchInput& input, const std::vector<Be
 
 std::string bench_markdown_table(const std::vector<BenchResult>& results) {
   std::string out =
-      "| mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag | peak MB |\n"
+      "| mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag | peak MiB |\n"
       "|---|---|---|---:|---:|---:|---:|---:|\n";
   for (const BenchResult& r : results) {
     // A '|' in the caller's label would start a new cell; a line break, a new row.

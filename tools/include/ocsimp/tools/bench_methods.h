@@ -106,7 +106,7 @@ std::vector<BenchResult> run_bench(const BenchInput& input, const std::vector<Be
                                    const std::vector<double>& target_ratios, const BenchOptions& options);
 
 // Markdown, one row per result: mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag |
-// peak MB (MB = 2^20 bytes; "-" where unknown).
+// peak MiB ("-" where unknown).
 std::string bench_markdown_table(const std::vector<BenchResult>& results);
 // Every number, one row per result, with a header line.
 std::string bench_csv(const std::vector<BenchResult>& results);
