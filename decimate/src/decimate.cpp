@@ -2797,11 +2797,19 @@ std::string nothing_to_decimate_reason(const DecimateStats& stats, bool welded) 
          ": nothing is left to simplify";
 }
 
-std::string repeated_faces_note(const DecimateStats& stats) {
-  if (stats.dropped_repeated_faces == 0) return "";
-  return counted(stats.dropped_repeated_faces, "face") +
-         " repeated another face's corners in the same order and " +
-         (stats.dropped_repeated_faces == 1 ? "was" : "were") + " left out";
+std::string dropped_faces_note(const DecimateStats& stats) {
+  const std::uint64_t degenerate = stats.dropped_degenerate_faces, repeated = stats.dropped_repeated_faces;
+  if (degenerate + repeated == 0 || stats.input_faces == 0) return "";  // none, or all (an error then)
+  std::string note;
+  if (degenerate > 0) {
+    note = counted(degenerate, "face") + " with a repeated corner" +
+           (stats.welded_vertices > 0 ? " (once vertices at equal positions are joined)" : "");
+  }
+  if (repeated > 0) {
+    note += (note.empty() ? counted(repeated, "face") : " and " + std::to_string(repeated)) +
+            " repeating another face's corners in the same order";
+  }
+  return note + (degenerate + repeated == 1 ? " was" : " were") + " left out";
 }
 
 const char* stop_name(DecimateStop stop) {

@@ -927,6 +927,7 @@ TEST(Cli, ListsRefuseEmptyAndRepeatedItems) {
       {bench + "--faces 100,100", "--faces: '100' is given twice"},
       {bench + "--faces 100 --methods decimate,decimate", "--methods: 'decimate' is given twice"},
       {bench + "--faces 100 --methods ,decimate", "--methods: '' is not a name"},
+      {bench + "--faces 100 --methods ''", "--methods: '' is not a name"},
       {lod + "--faces 100,50,100", "--faces: '100' is given twice"},
       {lod + "--ratios 0.5,,0.25", "--ratios: '' is not a ratio"}};
   for (const auto& [command, message] : cases) {
@@ -944,6 +945,21 @@ TEST(Cli, ListsRefuseEmptyAndRepeatedItems) {
        at = ok.out.find("\n| in |", at + 1))
     ++rows;
   EXPECT_EQ(rows, 4u) << ok.out;
+  // A target not below the input's faces runs too, and is said to leave the mesh as it is.
+  const std::size_t all = test::sphere(3).face_count();
+  const std::string whole = std::to_string(all);
+  const CommandResult above = run(bench + "--faces " + whole + ",10 --methods decimate", dir);
+  ASSERT_EQ(above.exit_code, 0) << above.err;
+  EXPECT_NE(above.err.find("the target of " + whole + " faces is not below the mesh's " + whole),
+            std::string::npos)
+      << above.err;
+  EXPECT_EQ(lines(above.err), 1u) << above.err;
+  const CommandResult level = run(lod + "--faces " + std::to_string(all + 1) + ",10", dir);
+  ASSERT_EQ(level.exit_code, 0) << level.err;
+  EXPECT_NE(level.err.find("level " + std::to_string(all + 1) + " is not below the input's " + whole),
+            std::string::npos)
+      << level.err;
+  EXPECT_EQ(read_mesh(dir / ("l" + std::to_string(all + 1) + ".ply")).face_count(), all);
 }
 
 // A summary printed after a report sent to standard output made it unreadable as JSON; simplify and lod

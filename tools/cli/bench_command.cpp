@@ -36,8 +36,8 @@ void add_bench_command(CLI::App& app) {
   auto* ratios = cmd->add_option("--ratios", flags->ratios,
                                  "Face targets as fractions of the input's faces (e.g. 0.1,0.02)");
   faces->excludes(ratios);
-  cmd->add_option("--methods", flags->methods,
-                  "Methods, comma-separated (default: all of " + method_names + ")");
+  auto* methods_option = cmd->add_option("--methods", flags->methods,
+                                         "Methods, comma-separated (default: all of " + method_names + ")");
   cmd->add_option("--repeat", flags->options.repeat,
                   "Runs per method and target; the median time is reported")
       ->capture_default_str()
@@ -61,7 +61,7 @@ void add_bench_command(CLI::App& app) {
   cmd->add_option("--json", flags->json, "Also write every number as JSON to this file")->check(file_name());
   cmd->add_option("--csv", flags->csv, "Also write every number as CSV to this file")->check(file_name());
   cmd->add_flag("-q,--quiet", flags->quiet, "Only the table: no progress lines on stderr");
-  cmd->callback([flags] {
+  cmd->callback([flags, methods_option] {
     if (flags->faces.empty() && flags->ratios.empty()) throw Error("bench: give --faces or --ratios");
     // Refused before the benchmark runs, not after it.
     for (const std::string* path : {&flags->json, &flags->csv}) {
@@ -76,11 +76,12 @@ void add_bench_command(CLI::App& app) {
     const std::vector<double> ratios =
         flags->ratios.empty() ? std::vector<double>{} : parse_ratio_list(flags->ratios, "--ratios");
     std::vector<BenchMethod> methods;
-    if (!flags->methods.empty()) {
+    if (methods_option->count() > 0) {  // given empty, the list is refused rather than read as "all"
       for (const std::string& name : parse_name_list(flags->methods, "--methods"))
         methods.push_back(parse_bench_method(name));
+    } else {
+      methods = available_bench_methods();
     }
-    if (methods.empty()) methods = available_bench_methods();
 
     BenchInput input;
     input.path = flags->input;
@@ -90,6 +91,13 @@ void add_bench_command(CLI::App& app) {
 
     std::vector<std::uint64_t> targets = faces;
     for (double ratio : ratios) targets.push_back(ratio_target(ratio, input.mesh.face_count()));
+    for (std::uint64_t target : faces) {
+      if (target >= input.mesh.face_count()) {
+        make_console(true, flags->input)
+            .warn("the target of " + std::to_string(target) + " faces is not below the mesh's " +
+                  std::to_string(input.mesh.face_count()) + ": its rows measure the mesh as it is");
+      }
+    }
 
     BenchOptions options = flags->options;
     if (!flags->quiet) {

@@ -461,7 +461,7 @@ void check_input_faces(const std::string& path, const WarningFn& warn, bool weld
   if (const std::string reason = nothing_to_decimate_reason(stats, weld); !reason.empty())
     throw Error(path, {}, reason);
   if (!warn) return;
-  if (const std::string note = repeated_faces_note(stats); !note.empty()) warn(note);
+  if (const std::string note = dropped_faces_note(stats); !note.empty()) warn(note);
   if (const std::string note = separate_faces_note(stats, weld); !note.empty()) warn(note);
 }
 
@@ -588,6 +588,12 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     }
   }
   if (options.on_targets) options.on_targets(levels);
+  for (std::uint64_t faces : levels) {
+    if (faces >= stage.input_faces && options.warn) {
+      options.warn("level " + std::to_string(faces) + " is not below the input's " +
+                   std::to_string(stage.input_faces) + " faces: its file holds them all");
+    }
+  }
   LodResult result;
   report_first_stage(stage, result);
 

@@ -206,8 +206,9 @@ std::string separate_faces_note(const DecimateStats& stats, bool welded);
 // otherwise. The result is then an empty mesh, which no command writes as if it were a simplification.
 std::string nothing_to_decimate_reason(const DecimateStats& stats, bool welded);
 
-// A warning for a run that left out faces repeating another (DecimateStats::dropped_repeated_faces); empty
-// when there were none.
-std::string repeated_faces_note(const DecimateStats& stats);
+// A warning for a run that left out faces with a repeated corner (DecimateStats::dropped_degenerate_faces) or
+// repeating another face (dropped_repeated_faces); empty when there were none, or when no face was left
+// (nothing_to_decimate_reason).
+std::string dropped_faces_note(const DecimateStats& stats);
 
 }  // namespace ocsimp
