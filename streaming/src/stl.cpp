@@ -228,8 +228,13 @@ class AsciiStlParser {
       }
     }
     if (out.size() > start) return true;
-    // A missing final "endsolid" is forgiven; stopping inside a facet is not.
-    if (state_ != State::outside && state_ != State::in_solid)
+    // A file cut short between two facets reads like a complete one but for its missing "endsolid": without
+    // it, a truncated copy was taken for the whole mesh.
+    if (state_ == State::in_solid) {
+      throw Error(reader_.path(), FilePosition::line(lines_.line_number()),
+                  "the file ends before 'endsolid' (cut short?)");
+    }
+    if (state_ != State::outside)
       throw Error(reader_.path(), FilePosition::line(lines_.line_number()), "the file ends inside a facet");
     return false;
   }

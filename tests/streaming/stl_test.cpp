@@ -169,7 +169,8 @@ TEST(Stl, AsciiToleratesCaseBlanksLineEndingsAndSeveralSolids) {
       "outer loop\n"
       "vertex 1 0 0\nvertex 1 1 0\nvertex 0.5 1.5 0\nvertex 0 1 0\n"  // a quad: fanned into two triangles
       "endloop\n"
-      "endfacet\n";  // no final endsolid
+      "endfacet\n"
+      "endsolid";  // without a line end
   test::write_file_bytes(dir / "two.stl", text);
   const IndexedMesh m = read_mesh(dir / "two.stl");
   EXPECT_EQ(m.face_count(), 3u);
@@ -261,6 +262,8 @@ const std::vector<test::MalformedCase> kMalformed = {
     {"ascii_missing_outer_loop.stl", FilePosition::Kind::line, 3, "expected 'outer loop'"},
     {"ascii_two_vertices.stl", FilePosition::Kind::line, 13, "a facet needs 3 vertices (found 2)"},
     {"ascii_truncated.stl", FilePosition::Kind::line, 12, "ends inside a facet"},
+    {"ascii_no_endsolid.stl", FilePosition::Kind::line, 8, "the file ends before 'endsolid'"},
+    {"ascii_solid_only.stl", FilePosition::Kind::line, 1, "the file ends before 'endsolid'"},
     {"ascii_garbage_in_solid.stl", FilePosition::Kind::line, 2, "expected 'facet' or 'endsolid'"},
     {"ascii_inf_vertex.stl", FilePosition::Kind::line, 5, "NaN or infinite"},
     {"ascii_extra_token.stl", FilePosition::Kind::line, 4, "unexpected '4'"},
