@@ -22,6 +22,7 @@
 #include <string>
 #include <string_view>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "byte_reader.h"
@@ -129,7 +130,9 @@ class ObjStream final : public TriangleStream {
       }
       report_progress();
     }
-    return batch.size() > 0;
+    if (batch.size() > 0) return true;
+    if (warn_ && !unread_note_.empty()) warn_(std::exchange(unread_note_, {}));
+    return false;
   }
 
   const IndexedMesh& vertices() const override { return vertices_; }
@@ -257,10 +260,7 @@ class ObjStream final : public TriangleStream {
     flush_sink();
     total_ = seen_;
     if (warn_ && clamped_colors_ > 0) warn_(clamped_colors_note(clamped_colors_));
-    if (warn_) {
-      const std::string note = unread_note({material_libraries_, materials_, other_geometry_});
-      if (!note.empty()) warn_(note);
-    }
+    unread_note_ = unread_note({material_libraries_, materials_, other_geometry_});
   }
 
   // Materials and geometry other than faces, for unread_note: the output has no place for them.
@@ -586,6 +586,9 @@ class ObjStream final : public TriangleStream {
   std::size_t capacity_;
   ProgressFn progress_;
   std::function<void(const std::string&)> warn_;
+  // What the file holds that no output keeps (unread_note), said once every face is read: a file that then
+  // fails got the warning and its error both.
+  std::string unread_note_;
   std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside [0, 1]
   // Out of core (ReadOptions::vertex_sink): positions and colors go there a chunk at a time; no vertex array
   // is kept.

@@ -404,6 +404,9 @@ class PlyStream final : public TriangleStream {
   detail::ByteReader reader_;
   ProgressFn progress_;
   std::function<void(const std::string&)> warn_;
+  // What the file holds that no output keeps (unread_note), said once every face is read: a file that then
+  // fails got the warning and its error both.
+  std::string unread_note_;
   std::uint64_t clamped_colors_ = 0;  // vertices with a floating-point color channel outside [0, 1]
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
@@ -588,8 +591,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
         elements.add(header_.elements[i].name);
     }
     for (const std::string& name : header_.texture_files) textures.add(name);
-    const std::string note = unread_note({vertex_properties, face_properties, elements, textures});
-    if (!note.empty()) warn_(note);
+    unread_note_ = unread_note({vertex_properties, face_properties, elements, textures});
   }
 
   const std::uint64_t data_bytes = reader_.file_size() - header_.data_offset;
@@ -1265,6 +1267,7 @@ void PlyStream::finish_faces() {
   current_element_ = face_element_;
   faces_done_ = true;
   report_progress(true);
+  if (warn_ && !unread_note_.empty()) warn_(std::exchange(unread_note_, {}));
 }
 
 void PlyStream::check_corner(std::int64_t index, std::uint64_t offset) const {

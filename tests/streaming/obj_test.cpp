@@ -185,6 +185,11 @@ TEST(Obj, SaysWhatItDoesNotRead) {
       "not read, so no output keeps them (ocsimp reads triangles and their vertices' positions, normals, "
       "colors and texture coordinates): material library the mats.mtl; materials red, blue; geometry "
       "other than faces: polylines (l), points (p)");
+  // A file that then fails gets its error alone: it is said once every face is read.
+  told.clear();
+  test::write_file_bytes(dir / "bad.obj", "mtllib the mats.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
+  EXPECT_THROW(read_mesh(dir / "bad.obj", options), Error);
+  EXPECT_TRUE(told.empty()) << told[0];
   told.clear();
   test::write_file_bytes(dir / "plain.obj", "o part\ng side\ns 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
   read_mesh(dir / "plain.obj", options);

@@ -647,6 +647,11 @@ TEST(PlyLayout, SaysWhatItDoesNotRead) {
   EXPECT_EQ(read_mesh(dir / "many.ply", options).positions[1], Vec3f(1, 0, 0));
   ASSERT_EQ(told.size(), 1u);
   EXPECT_NE(told[0].find("vertex properties p0, p1, p2, p3, p4, p5 and more"), std::string::npos) << told[0];
+  // A file that then fails gets its error alone: it is said once every face is read.
+  write_bytes(dir / "cut.ply", header + "0 0" + line + " 0\n1 0" + line + " 0\n0 1" + line + " 0\n3 0 1\n");
+  told.clear();
+  EXPECT_THROW(read_mesh(dir / "cut.ply", options), Error);
+  EXPECT_TRUE(told.empty()) << told[0];
   // Nothing to say of a file of positions, normals, colors and uvs only.
   write_mesh(dir / "plain.ply", test::sphere(2));
   told.clear();
@@ -1008,10 +1013,11 @@ TEST(PlyLayout, PerCornerTextureCoordinatesGoToTheirVertices) {
         ReadOptions options;
         options.warn = [&](const std::string& message) { told.push_back(message); };
         const IndexedMesh mesh = read_mesh(path, options);
-        // The texture's number is not read, and vertices 0 and 2 are on the seam.
+        // Vertices 0 and 2 are on the seam, and (said once the faces are all read) the texture's number is
+        // not read.
         ASSERT_EQ(told.size(), 2u);
-        EXPECT_NE(told[0].find("face property texnumber"), std::string::npos) << told[0];
-        EXPECT_EQ(told[1].rfind("2 vertices on texture seams", 0), 0u) << told[1];
+        EXPECT_EQ(told[0].rfind("2 vertices on texture seams", 0), 0u) << told[0];
+        EXPECT_NE(told[1].find("face property texnumber"), std::string::npos) << told[1];
         EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{faces[0], faces[1]}));
         ASSERT_TRUE(mesh.has_uvs());
         EXPECT_EQ(mesh.uvs, expected);
