@@ -182,6 +182,21 @@ TEST(Cli, InfoCountsZeroAreaFacesApartFromRepeatedCorners) {
   EXPECT_NE(text.out.find("  zero-area faces        2\n"), std::string::npos) << text.out;
 }
 
+// A file of no vertex has no bounding box: the text said (inf, inf, inf) .. (-inf, -inf, -inf), where --json
+// says null.
+TEST(Cli, InfoOfAnEmptyMeshHasNoBoundingBox) {
+  test::TempDir dir;
+  std::ofstream(dir / "empty.ply")
+      << ("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
+          "element face 0\nproperty list uchar int vertex_indices\nend_header\n");
+  const CommandResult text = run("info " + (dir / "empty.ply"), dir);
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find("  bounding box           none (no vertex)\n"), std::string::npos) << text.out;
+  EXPECT_EQ(text.out.find("inf"), std::string::npos) << text.out;
+  const nlohmann::json j = nlohmann::json::parse(run("info --json " + (dir / "empty.ply"), dir).out);
+  EXPECT_TRUE(j["bounding_box"]["min"][0].is_null());
+}
+
 // The pipeline plans within --memory-limit from measured bytes per cell, but a plan can come out short (a
 // grid larger than planned): a 20 M-triangle scan to 1 M faces under 500M peaked at 633 MiB without a word.
 // The run now says when its peak went over; no process fits in 1M, and every one in 4G.

@@ -73,9 +73,13 @@ void add_info_command(CLI::App& app) {
     // Enough digits to tell the box's sides apart however far from zero it lies, up to what a double holds.
     const int digits = std::min(
         17, 6 + std::max(0, int(std::ceil(std::log10(std::max(1.0, mesh.origin.cwiseAbs().maxCoeff()))))));
-    std::printf("  bounding box           (%.*g, %.*g, %.*g) .. (%.*g, %.*g, %.*g)\n", digits, box.lo.x(),
-                digits, box.lo.y(), digits, box.lo.z(), digits, box.hi.x(), digits, box.hi.y(), digits,
-                box.hi.z());
+    if (box.empty()) {
+      std::printf("  bounding box           none (no vertex)\n");  // as --json's null, not inf .. -inf
+    } else {
+      std::printf("  bounding box           (%.*g, %.*g, %.*g) .. (%.*g, %.*g, %.*g)\n", digits, box.lo.x(),
+                  digits, box.lo.y(), digits, box.lo.z(), digits, box.hi.x(), digits, box.hi.y(), digits,
+                  box.hi.z());
+    }
     if (mesh.origin != Vec3d::Zero()) {
       std::printf("  origin                 (%.17g, %.17g, %.17g): positions are held relative to it\n",
                   mesh.origin.x(), mesh.origin.y(), mesh.origin.z());
