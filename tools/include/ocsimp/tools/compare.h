@@ -8,7 +8,8 @@
 //   rms       = sqrt(average d(p)^2) over the area samples.
 // Vertices only feed the maximum: they are not spread by area, so counting them in the averages would weight
 // finely tessellated regions more (a 10 M-triangle scan has 5 M vertices against 1 M area samples).
-// A surface of zero total area (every triangle degenerate) is measured at its vertices alone.
+// A surface of zero total area (every triangle degenerate), or one sampled with samples = 0, is measured at
+// its vertices alone: the averages are then over its vertices.
 // Symmetric figures combine the two directions:
 //   hausdorff = max(forward, backward), mean = (forward + backward) / 2,
 //   rms = sqrt((forward_rms^2 + backward_rms^2) / 2)   (the definition /work/shared/BASELINES.md uses).
