@@ -7,6 +7,7 @@
 #if defined(__linux__)
 #include <sys/mman.h>
 #endif
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <cctype>
@@ -76,6 +77,12 @@ std::uint64_t control_group_memory_limit() {
     if (bytes > 0) limit = limit == 0 ? bytes : std::min(limit, bytes);
   }
   return limit;
+}
+
+std::uint64_t address_space_limit() {
+  rlimit limit{};
+  if (getrlimit(RLIMIT_AS, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY) return 0;
+  return static_cast<std::uint64_t>(limit.rlim_cur);
 }
 
 std::uint64_t physical_memory_bytes() {

@@ -59,7 +59,8 @@ void add_cluster_command(CLI::App& app) {
       ->capture_default_str()
       ->check(non_negative_number());
   cmd->add_option("--memory-limit", flags->memory_limit,
-                  "Bytes the input's vertex array may take, e.g. 2G (default: a third of RAM); a larger one "
+                  "Bytes the input's vertex array may take, e.g. 2G (default: a third of RAM, or half of "
+                  "`ulimit -v` where less); a larger one "
                   "is dereferenced on disk under TMPDIR and its faces clustered as triangle soups")
       ->check(byte_size());
   cmd->add_option("--threads", flags->options.threads,

@@ -61,7 +61,7 @@ void add_lod_command(CLI::App& app) {
                   "{faces} then becomes each ratio's count")
       ->excludes(faces);
   cmd->add_option("--memory-limit", flags->memory_limit,
-                  "Peak memory budget, e.g. 2G (default: a third of RAM)")
+                  "Peak memory budget, e.g. 2G (default: a third of RAM, or half of `ulimit -v` where less)")
       ->check(byte_size());
   cmd->add_flag(
       "--two-stage", o.two_stage,

@@ -67,7 +67,8 @@ void add_simplify_command(CLI::App& app) {
       ->check(non_negative_number(true));
   cmd->add_option(
          "--memory-limit", flags->memory_limit,
-         "Peak memory budget, e.g. 2G (default: a third of RAM); an input whose vertex array does not "
+         "Peak memory budget, e.g. 2G (default: a third of RAM, or half of `ulimit -v` where less); an input "
+         "whose vertex array does not "
          "fit beside the clustering is dereferenced on disk under TMPDIR when that takes less memory (a "
          "target far below the input)")
       ->check(byte_size());

@@ -358,7 +358,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       process_bytes + vertex_bytes + kInCoreBytesPerFace * static_cast<double>(stage.cluster.input_triangles);
   if (!stage.cluster.target_met && final_target > 0 && clustered_faces < final_target &&
       stage.cluster.input_triangles > final_target && !stage.out_of_core &&
-      whole_peak <= static_cast<double>(physical_memory_bytes())) {
+      whole_peak <= static_cast<double>(physical_memory_bytes()) &&
+      (address_space_limit() == 0 || whole_peak <= 0.5 * static_cast<double>(address_space_limit()))) {
     const bool over = whole_peak > budget;
     stage.memory_needed = over ? static_cast<std::uint64_t>(whole_peak) : 0;
     if (options.warn) {
@@ -473,7 +474,12 @@ std::string attributes_left_out_warning(const std::string& left_out) {
 }
 
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
-  return memory_limit > 0 ? memory_limit : physical_memory_bytes() / 3;
+  if (memory_limit > 0) return memory_limit;
+  // Under `ulimit -v`, half of it: a budget of a third of the machine's memory planned an in-core run that
+  // the address-space limit then refused (a 3 M-triangle scan under 400 MB: out of memory at 250 MiB, where
+  // clustering first fits), and code, thread stacks and the allocator's arenas take address space too.
+  const std::uint64_t budget = physical_memory_bytes() / 3, address_space = address_space_limit();
+  return address_space > 0 ? std::min(budget, address_space / 2) : budget;
 }
 
 SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& options) {

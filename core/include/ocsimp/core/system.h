@@ -14,6 +14,9 @@ namespace ocsimp {
 // container's memory limit) allows less. A third of it is the default --memory-limit, which in a container
 // of 8 GB on a 64 GB host would otherwise be 21 GB.
 std::uint64_t physical_memory_bytes();
+// The address space this process may have (its RLIMIT_AS, as `ulimit -v` sets it), in bytes; 0 when there
+// is no such limit. Code, libraries, thread stacks and the allocator's reserved arenas count against it too.
+std::uint64_t address_space_limit();
 // A control group's memory limit in bytes (cgroup v2 memory.max, or v1 memory.limit_in_bytes, as a container
 // sees its own group); 0 when there is none.
 std::uint64_t control_group_memory_limit();

@@ -73,7 +73,8 @@ std::string attributes_left_out_warning(const std::string& left_out);
 // faces left out and of a soup's separate faces.
 void check_input_faces(const std::string& path, const WarningFn& warn, bool weld, const DecimateStats& stats);
 
-// The memory budget in force for `memory_limit` (0: a third of physical memory).
+// The memory budget in force for `memory_limit` (0: a third of physical memory, or half the address-space
+// limit where that is less).
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit);
 
 // One phase of a run, for the summary table and the JSON report.
