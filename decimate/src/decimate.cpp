@@ -389,9 +389,10 @@ struct Storage {
   BigVector<Index> vf;  // CSR face lists, one segment per input vertex
   BigVector<Edge> edges;
   std::vector<std::vector<Index>> virtual_pairs;  // per vertex; only with pair_distance
-  // Only when welding joined an attribute seam (see seams.h): the input before welding, and the input face
-  // each face record descends from (moved along by compact).
-  bool seams = false;
+  // When the input has attributes (see seams.h): the input before welding, and the input face each face
+  // record descends from (moved along by compact), which the output's attributes are interpolated from.
+  bool keeps_source = false;
+  bool seams = false;  // welding joined an attribute seam, whose sides the output splits again
   decimate_detail::SeamSource seam_source;
   std::vector<Index> face_origin;
   std::vector<std::uint8_t> welded_at;  // 1 at a vertex others were welded into (until the edges are built)
@@ -516,6 +517,12 @@ struct Decimator {
         throw Error("decimate: vertex " + std::to_string(v) + " has a non-finite texture coordinate");
     }
     if (opt.weld) weld(in);
+    // Without a seam too: interpolated along each collapsed edge, the attributes of a vertex that ended where
+    // one its collapse removed had been (a flat grid's corner, taken with its last face by a collapse beside
+    // it) were its neighbours' blend, 0.2 off in uv on a linear field; from the input's surface at the
+    // vertex's position they are that corner's. The faces kept below are that surface (build() moves them to
+    // the source once it has read them).
+    const bool cleaned_source = !storage.keeps_source && (m.has_normals() || m.has_colors() || m.has_uvs());
     const std::vector<std::uint8_t> repeat = repeated_faces(m.triangles, n);
     std::size_t kept = 0;
     for (std::size_t f = 0; f < m.triangles.size(); ++f) {
@@ -528,11 +535,16 @@ struct Decimator {
         ++stats.dropped_repeated_faces;
         continue;
       }
-      if (storage.seams) storage.face_origin.push_back(static_cast<Index>(f));
+      if (storage.keeps_source) storage.face_origin.push_back(static_cast<Index>(f));
       m.triangles[kept++] = t;
     }
     m.triangles.resize(kept);
     if (kept >= first_state / 3) throw Error("decimate: too many faces (" + std::to_string(kept) + ")");
+    if (cleaned_source) {
+      storage.keeps_source = true;
+      storage.face_origin.resize(kept);
+      std::iota(storage.face_origin.begin(), storage.face_origin.end(), Index{0});
+    }
   }
 
   // Merges vertices at equal positions into the lowest index among them.
@@ -548,6 +560,7 @@ struct Decimator {
     for (std::size_t v = 0; v < n && !storage.seams; ++v) storage.seams = target[v] != v && side[v] == v;
     if (storage.seams) {
       // The positions and attributes join the source in build(), once the decimator has what it needs.
+      storage.keeps_source = true;
       storage.seam_source.triangles = m.triangles;
       for (Triangle& t : storage.seam_source.triangles) {
         for (Index& v : t) v = side[v];
@@ -594,9 +607,9 @@ struct Decimator {
         x.q = Quadric{};
       }
     });
-    if (storage.seams) {
-      // Across a seam the output's attributes come from the input's (see seams.h): the decimator only needs
-      // its own to weigh them (attribute_weight).
+    if (storage.keeps_source) {
+      // The output's attributes come from the input's (see seams.h): the decimator only needs its own to
+      // weigh them (attribute_weight).
       decimate_detail::SeamSource& source = storage.seam_source;
       if (opt.attribute_weight > 0) {
         source.normals = m.normals;
@@ -628,7 +641,11 @@ struct Decimator {
         encode_normal(n, face.ref);
       }
     });
-    std::vector<Triangle>().swap(m.triangles);
+    if (storage.keeps_source && !storage.seams) {
+      storage.seam_source.triangles = std::move(m.triangles);  // the cleaned faces (see validate_and_clean)
+    } else {
+      std::vector<Triangle>().swap(m.triangles);
+    }
 
     Box3 box;
     {
@@ -652,7 +669,7 @@ struct Decimator {
 
     build_edges();
     build_quadrics(in.quadrics, m.positions);
-    if (storage.seams) {
+    if (storage.keeps_source) {
       storage.seam_source.positions = std::move(m.positions);
       std::vector<std::uint8_t>().swap(storage.welded_at);
     }
@@ -1532,7 +1549,7 @@ struct Decimator {
           for (std::size_t f = 0; f < nf; ++f) {
             const Face& t = faces[f];
             if (t.v[0] == kNone) continue;
-            if (storage.seams) origin_of[nf_new] = origin_of[f];
+            if (storage.keeps_source) origin_of[nf_new] = origin_of[f];
             faces[nf_new++] = {{id[t.v[0]], id[t.v[1]], id[t.v[2]]},
                                {vf[t.e[0]], vf[t.e[1]], vf[t.e[2]]},
                                {t.ref[0], t.ref[1]},
@@ -1556,7 +1573,7 @@ struct Decimator {
     staged_edge = kNone;
     verts.resize(nv_new);
     faces.resize(nf_new);
-    if (storage.seams) storage.face_origin.resize(nf_new);
+    if (storage.keeps_source) storage.face_origin.resize(nf_new);
     edges.resize(ne_new);
     if (!normals.empty()) normals.resize(nv_new);
     if (!colors.empty()) colors.resize(nv_new);
@@ -2754,10 +2771,19 @@ struct Decimator {
       const Face& t = faces[f];
       if (t.v[0] == kNone) continue;
       out.triangles.push_back({remap[t.v[0]], remap[t.v[1]], remap[t.v[2]]});
-      if (storage.seams) origin_of.push_back(storage.face_origin[f]);
+      if (storage.keeps_source) origin_of.push_back(storage.face_origin[f]);
     }
-    if (storage.seams)
-      stats.seam_copies = decimate_detail::restore_seams(storage.seam_source, origin_of, out, quadrics);
+    if (storage.keeps_source) {
+      // The run's records are done with: freed before the walks' own tables come on top of them (a 1 M-face
+      // scan with normals and colors to 10 %: 188 MB at peak with them, 177 without).
+      BigVector<Vertex>().swap(verts);
+      BigVector<Face>().swap(faces);
+      BigVector<Index>().swap(vf);
+      BigVector<Edge>().swap(edges);
+      std::vector<Index>().swap(storage.face_origin);
+      stats.seam_copies =
+          decimate_detail::restore_attributes(storage.seam_source, origin_of, out, quadrics, storage.seams);
+    }
     return out;
   }
 };

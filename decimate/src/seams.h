@@ -8,7 +8,9 @@
 // current one that lies nearer the position, ends at the nearest point of that side, and the attributes are
 // interpolated there. The walk crosses faces through the input's own vertices, never through the weld, so it
 // stays on its side. The corners of an output vertex whose attributes then agree share one output vertex;
-// those that differ (the two sides of a seam) get one each, at the same position.
+// those that differ (the two sides of a seam) get one each, at the same position. An input without seams
+// takes its attributes the same way, one walk a vertex: interpolated along the collapsed edges instead, a
+// vertex that ended where a removed one had been got its neighbours' blend.
 #pragma once
 
 #include <cstdint>
@@ -34,12 +36,14 @@ struct SeamSource {
 // vertex on their side, and only copies that differ are the sides of a seam.
 std::vector<Index> same_attribute_targets(const IndexedMesh& mesh, const std::vector<Index>& position_target);
 
-// Gives every corner of `out` its side's attributes and splits the vertices where sides differ.
-// `face_origin[f]` is the index in source.triangles of the input face output face f descends from; `out`
-// holds positions and triangles (its attribute arrays are replaced) and `quadrics`, when not null, one
-// quadric per vertex, which a split vertex shares out evenly among its copies, so that welding them again
-// (the next level of an LOD chain) adds them back up to the whole. Returns the vertices added.
-std::uint64_t restore_seams(const SeamSource& source, const std::vector<Index>& face_origin, IndexedMesh& out,
-                            std::vector<Quadric>* quadrics);
+// Gives every corner of `out` its side's attributes and, with `split_seams`, splits the vertices where sides
+// differ; without (an input without seams), each vertex has one side, and takes the attributes where a walk
+// from its first corner ends. `face_origin[f]` is the index in source.triangles of the input face output face
+// f descends from; `out` holds positions and triangles (its attribute arrays are replaced) and `quadrics`,
+// when not null, one quadric per vertex, which a split vertex shares out evenly among its copies, so that
+// welding them again (the next level of an LOD chain) adds them back up to the whole. Returns the vertices
+// added.
+std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Index>& face_origin,
+                                 IndexedMesh& out, std::vector<Quadric>* quadrics, bool split_seams);
 
 }  // namespace ocsimp::decimate_detail
