@@ -404,9 +404,9 @@ class PlyStream final : public TriangleStream {
   detail::ByteReader reader_;
   ProgressFn progress_;
   std::function<void(const std::string&)> warn_;
-  // What the file holds that no output keeps (unread_note), said once every face is read: a file that then
-  // fails got the warning and its error both.
-  std::string unread_note_;
+  // What the file holds that no output keeps (unread_note, colors finer than 8 bits), said once every face is
+  // read: a file that then fails got the warning and its error both.
+  std::vector<std::string> notes_at_end_;
   std::uint64_t clamped_colors_ = 0;  // vertices with a floating-point color channel outside [0, 1]
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
@@ -591,7 +591,17 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
         elements.add(header_.elements[i].name);
     }
     for (const std::string& name : header_.texture_files) textures.add(name);
-    unread_note_ = unread_note({vertex_properties, face_properties, elements, textures});
+    if (std::string note = unread_note({vertex_properties, face_properties, elements, textures});
+        !note.empty())
+      notes_at_end_.push_back(std::move(note));
+    // Colors are held, and written, at 8 bits a channel: 16-bit or floating-point ones lose their low bits.
+    for (std::size_t i = 0; i < vertex_plan_.slots.size(); ++i) {
+      const PlyType type = vertex_element.properties[i].type;
+      if (vertex_plan_.slots[i] == Slot::red && type != PlyType::uint8 && type != PlyType::int8) {
+        notes_at_end_.push_back(std::string("its colors, stored as ") + ply_type_name(type) +
+                                ", are kept to 8 bits a channel, as every output writes them");
+      }
+    }
   }
 
   const std::uint64_t data_bytes = reader_.file_size() - header_.data_offset;
@@ -1267,7 +1277,9 @@ void PlyStream::finish_faces() {
   current_element_ = face_element_;
   faces_done_ = true;
   report_progress(true);
-  if (warn_ && !unread_note_.empty()) warn_(std::exchange(unread_note_, {}));
+  if (warn_) {
+    for (const std::string& note : std::exchange(notes_at_end_, {})) warn_(note);
+  }
 }
 
 void PlyStream::check_corner(std::int64_t index, std::uint64_t offset) const {

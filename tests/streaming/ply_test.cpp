@@ -597,13 +597,26 @@ TEST(PlyTypes, FloatColorsOutsideZeroToOneAreClampedWithAWarning) {
   options.warn = [&](const std::string& message) { told.push_back(message); };
   const IndexedMesh mesh = read_mesh(dir / "c.ply", options);
   EXPECT_EQ(mesh.colors, (std::vector<Color>{{255, 255, 255, 255}, {0, 128, 255, 255}, {0, 0, 0, 255}}));
-  ASSERT_EQ(told.size(), 1u);
+  // And that they are kept to 8 bits, as every output writes them.
+  const std::string eight_bits =
+      "its colors, stored as float, are kept to 8 bits a channel, as every output writes them";
+  ASSERT_EQ(told.size(), 2u);
   EXPECT_EQ(told[0],
             "2 vertices have a floating-point color channel outside 0..1, clamped to it (are the colors on a "
             "0..255 scale?)");
+  EXPECT_EQ(told[1], eight_bits);
   told.clear();
   write_bytes(dir / "d.ply", header + "0 0 0 1 0.5 0 1\n1 0 0 0 0.5 1 0\n0 1 0 0 0 0.25 1\n3 0 1 2\n");
   EXPECT_EQ(read_mesh(dir / "d.ply", options).colors.size(), 3u);
+  EXPECT_EQ(told, std::vector<std::string>{eight_bits});
+  // 8-bit colors lose nothing: no word.
+  told.clear();
+  write_bytes(dir / "e.ply",
+              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+              "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+              "0 0 0 1 2 3\n1 0 0 4 5 6\n0 1 0 7 8 9\n3 0 1 2\n");
+  EXPECT_EQ(read_mesh(dir / "e.ply", options).colors[2], (Color{7, 8, 9, 255}));
   EXPECT_TRUE(told.empty()) << told[0];
 }
 
