@@ -134,31 +134,28 @@ void add_compare_command(CLI::App& app) {
       write_json_report(flags->report, report);
     }
     // The report is then the output: the table, or --json's copy of the same fields, would follow it.
-    if (is_standard_output(flags->report)) {
-      publish(held);
-      return;
-    }
-    if (flags->json) {
+    const bool report_out = is_standard_output(flags->report);
+    if (flags->json && !report_out) {
       std::printf("%s\n", json_text(out).c_str());
-      publish(held);
-      return;
+    } else if (!report_out) {
+      std::printf("original    %s: %zu vertices, %zu faces, bounding-box diagonal %g\n",
+                  flags->original.c_str(), original.vertices, original.faces, d.diagonal);
+      std::printf("simplified  %s: %zu vertices, %zu faces\n", flags->simplified.c_str(), simplified.vertices,
+                  simplified.faces);
+      std::printf("samples     forward %zu + %zu vertices, backward %zu + %zu vertices, seed %llu\n\n",
+                  d.forward.samples, d.forward.vertex_samples, d.backward.samples, d.backward.vertex_samples,
+                  static_cast<unsigned long long>(options.seed));
+      std::printf("  %-10s %23s  %23s  %23s\n", "", "Hausdorff   (% diag)", "mean   (% diag)",
+                  "RMS   (% diag)");
+      print_row("forward", d.forward.hausdorff, d.forward.mean, d.forward.rms, d);
+      print_row("backward", d.backward.hausdorff, d.backward.mean, d.backward.rms, d);
+      print_row("symmetric", d.hausdorff, d.mean, d.rms, d);
+      std::printf(
+          "\nforward: from the original's surface to the simplified one; backward: the reverse. Symmetric: "
+          "max of the\nHausdorff distances, average of the means, RMS = sqrt((forward^2 + backward^2) / "
+          "2).\n");
+      if (!flags->quiet) std::fprintf(stderr, "measured in %.2f s\n", seconds);
     }
-    std::printf("original    %s: %zu vertices, %zu faces, bounding-box diagonal %g\n",
-                flags->original.c_str(), original.vertices, original.faces, d.diagonal);
-    std::printf("simplified  %s: %zu vertices, %zu faces\n", flags->simplified.c_str(), simplified.vertices,
-                simplified.faces);
-    std::printf("samples     forward %zu + %zu vertices, backward %zu + %zu vertices, seed %llu\n\n",
-                d.forward.samples, d.forward.vertex_samples, d.backward.samples, d.backward.vertex_samples,
-                static_cast<unsigned long long>(options.seed));
-    std::printf("  %-10s %23s  %23s  %23s\n", "", "Hausdorff   (% diag)", "mean   (% diag)",
-                "RMS   (% diag)");
-    print_row("forward", d.forward.hausdorff, d.forward.mean, d.forward.rms, d);
-    print_row("backward", d.backward.hausdorff, d.backward.mean, d.backward.rms, d);
-    print_row("symmetric", d.hausdorff, d.mean, d.rms, d);
-    std::printf(
-        "\nforward: from the original's surface to the simplified one; backward: the reverse. Symmetric: max "
-        "of the\nHausdorff distances, average of the means, RMS = sqrt((forward^2 + backward^2) / 2).\n");
-    if (!flags->quiet) std::fprintf(stderr, "measured in %.2f s\n", seconds);
     publish(held);
   });
 }
