@@ -150,6 +150,14 @@ struct FirstStage {
   double target_ratio = 0;
 };
 
+// The most memory the process can hold: the machine's (or its container's), and half its address-space
+// limit (ulimit -v) where it has one, as code, thread stacks and the allocator's arenas take address space
+// too.
+std::uint64_t memory_room() {
+  const std::uint64_t physical = physical_memory_bytes(), address_space = address_space_limit();
+  return address_space > 0 ? std::min(physical, address_space / 2) : physical;
+}
+
 FirstStage first_stage(const std::string& input_path, const SimplifyOptions& options) {
   FirstStage stage;
   stage.memory_limit = effective_memory_limit(options.memory_limit);
@@ -358,8 +366,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       process_bytes + vertex_bytes + kInCoreBytesPerFace * static_cast<double>(stage.cluster.input_triangles);
   if (!stage.cluster.target_met && final_target > 0 && clustered_faces < final_target &&
       stage.cluster.input_triangles > final_target && !stage.out_of_core &&
-      whole_peak <= static_cast<double>(physical_memory_bytes()) &&
-      (address_space_limit() == 0 || whole_peak <= 0.5 * static_cast<double>(address_space_limit()))) {
+      whole_peak <= static_cast<double>(memory_room())) {
     const bool over = whole_peak > budget;
     stage.memory_needed = over ? static_cast<std::uint64_t>(whole_peak) : 0;
     if (options.warn) {
@@ -474,12 +481,10 @@ std::string attributes_left_out_warning(const std::string& left_out) {
 }
 
 std::uint64_t effective_memory_limit(std::uint64_t memory_limit) {
-  if (memory_limit > 0) return memory_limit;
-  // Under `ulimit -v`, half of it: a budget of a third of the machine's memory planned an in-core run that
-  // the address-space limit then refused (a 3 M-triangle scan under 400 MB: out of memory at 250 MiB, where
-  // clustering first fits), and code, thread stacks and the allocator's arenas take address space too.
-  const std::uint64_t budget = physical_memory_bytes() / 3, address_space = address_space_limit();
-  return address_space > 0 ? std::min(budget, address_space / 2) : budget;
+  // A third of the machine's memory, and never more than the room the process has: under `ulimit -v`, a third
+  // of the machine planned an in-core run that the address-space limit then refused (a 3 M-triangle scan
+  // under 400 MB: out of memory at 250 MiB, where clustering first fits).
+  return memory_limit > 0 ? memory_limit : std::min(physical_memory_bytes() / 3, memory_room());
 }
 
 SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& options) {
