@@ -91,11 +91,11 @@ void add_bench_command(CLI::App& app) {
 
     std::vector<std::uint64_t> targets = faces;
     for (double ratio : ratios) targets.push_back(ratio_target(ratio, input.mesh.face_count()));
+    const Console console = make_console(true, flags->input);  // warnings only: bench draws no bar
     for (std::uint64_t target : faces) {
       if (target >= input.mesh.face_count()) {
-        make_console(true, flags->input)
-            .warn("the target of " + std::to_string(target) + " faces is not below the mesh's " +
-                  std::to_string(input.mesh.face_count()) + ": its rows measure the mesh as it is");
+        console.warn("the target of " + std::to_string(target) + " faces is not below the mesh's " +
+                     std::to_string(input.mesh.face_count()) + ": its rows measure the mesh as it is");
       }
     }
 

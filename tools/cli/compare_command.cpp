@@ -67,10 +67,10 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("--seed", flags->options.seed, "Sampling seed (same seed, same numbers)")
       ->capture_default_str()
       ->check(whole_number(0));
-  cmd->add_flag("--no-vertices", flags->no_vertices,
-                "Do not also measure every vertex (vertices only raise the Hausdorff distance, but for a "
-                "side of no area "
-                "samples, with --samples 0 or no area, whose averages are over its vertices)");
+  cmd->add_flag(
+      "--no-vertices", flags->no_vertices,
+      "Do not also measure every vertex (vertices only raise the Hausdorff distance, but for a "
+      "side of no area samples, with --samples 0 or no area, whose averages are over its vertices)");
   cmd->add_flag("--json", flags->json, "Print one JSON object instead of a table");
   cmd->add_option("--report", flags->report, "Also write the JSON, with timing, to this file")
       ->check(file_name());
