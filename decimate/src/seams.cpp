@@ -135,7 +135,8 @@ struct Charts {
 
 class Walker {
  public:
-  Walker(const SeamSource& s, const FaceLists& lists, const Charts& charts)
+  // `charts`: null where no side is told from another (no seam to split), and then no chart is named.
+  Walker(const SeamSource& s, const FaceLists& lists, const Charts* charts)
       : s_(s), lists_(lists), charts_(charts) {}
 
   // The attributes of the side of original vertex `start` at position p (its own where no face with area
@@ -157,7 +158,7 @@ class Walker {
       if (best.face == current) break;
     }
     Attributes a = best.face == kNone ? vertex_attributes(start) : interpolate(best);
-    a.chart = charts_.of(start);
+    if (charts_) a.chart = charts_->of(start);
     a.d2 = best.d2;
     return a;
   }
@@ -218,7 +219,7 @@ class Walker {
   using Vec2d = Eigen::Vector2d;
   const SeamSource& s_;
   const FaceLists& lists_;
-  const Charts& charts_;
+  const Charts* charts_;
 };
 
 // Each chart's uv extent per axis (zero for a chart of one vertex).
@@ -307,8 +308,6 @@ std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Ind
                                  IndexedMesh& out, std::vector<Quadric>* quadrics, bool split_seams) {
   const std::size_t nv = out.positions.size(), nf = out.triangles.size();
   const FaceLists lists(source);
-  const Charts charts(source, lists);
-  const Walker walker(source, lists, charts);
 
   // Without seams a vertex has one side: one walk a vertex, from its first corner, gives its attributes (a
   // walk per corner took a fifth of a 1 M-face decimation to 10 %).
@@ -316,6 +315,7 @@ std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Ind
     out.normals.resize(source.normals.empty() ? 0 : nv);
     out.uvs.resize(source.uvs.empty() ? 0 : nv);
     out.colors.resize(source.colors.empty() ? 0 : nv);
+    const Walker walker(source, lists, nullptr);
     std::vector<std::size_t> first(nv, 3 * nf);
     for (std::size_t c = 3 * nf; c-- > 0;) first[out.triangles[c / 3][c % 3]] = c;
     tbb::parallel_for(
@@ -332,6 +332,8 @@ std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Ind
     return 0;
   }
 
+  const Charts charts(source, lists);
+  const Walker walker(source, lists, &charts);
   const std::vector<Vec2f> uv_extent = chart_uv_extents(source, charts);
   // Each corner's attributes, from its own side.
   std::vector<Attributes> corner(3 * nf);
