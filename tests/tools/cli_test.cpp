@@ -1039,7 +1039,7 @@ TEST(Cli, AFailedWriteToStandardOutputIsAnError) {
 
 // A run whose summary or report could not be written failed (exit 2), and a failed run leaves no output:
 // decimate, simplify, cluster and gen left their mesh behind, with the report at /dev/full or the summary
-// on a full disk.
+// on a full disk. A closed standard output is such a failure too (the summary went into the mesh).
 TEST(Cli, AnUnwrittenSummaryOrReportLeavesNoMesh) {
   test::TempDir dir;
   const std::string mesh = dir / "square.ply", out = dir / "out.ply", err = dir / "stderr.txt";
@@ -1047,7 +1047,7 @@ TEST(Cli, AnUnwrittenSummaryOrReportLeavesNoMesh) {
   const std::string mesh_commands[] = {"decimate " + mesh + " --faces 20", "simplify " + mesh + " --faces 20",
                                        "cluster " + mesh + " --grid 4", "gen --triangles 1000"};
   for (const std::string& command : mesh_commands) {
-    for (const char* failing : {" >/dev/full", " --report /dev/full >/dev/null"}) {
+    for (const char* failing : {" >/dev/full", " >&-", " --report /dev/full >/dev/null"}) {
       if (command.rfind("gen", 0) == 0 && std::string(failing).find("--report") != std::string::npos)
         continue;
       const std::string line = kOcsimp + " " + command + " -o " + out + failing + " 2>" + err;
@@ -1067,6 +1067,23 @@ TEST(Cli, AnUnwrittenSummaryOrReportLeavesNoMesh) {
     EXPECT_EQ(WEXITSTATUS(status), 2) << command;
     EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path), {}), 2) << command;  // mesh, err
   }
+}
+
+// A warning to a closed standard error goes nowhere: the output mesh, opened on the lowest free descriptor,
+// took the warning at its end and could not be read back.
+TEST(Cli, AClosedStandardErrorLeavesTheMeshWhole) {
+  test::TempDir dir;
+  const std::string mesh = dir / "square.ply", out = dir / "out.ply";
+  write_mesh(mesh, test::grid_square(8));
+  // One cell: every face collapses, which is warned about.
+  const int status = std::system((kOcsimp + " cluster -q " + mesh + " -o " + out + " --grid 1 2>&-").c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  ReadOptions options;
+  options.faces_required = false;
+  const IndexedMesh read = read_mesh(out, options);
+  EXPECT_EQ(read.face_count(), 0u);
+  EXPECT_EQ(read.vertex_count(), 1u);
 }
 
 // Killed while it writes, by a signal it can catch or by SIGKILL (as the out-of-memory killer does), gen

@@ -5,11 +5,28 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+
 #include "commands.h"
 #include "ocsimp/core/error.h"
 #include "ocsimp/core/system.h"
 
+namespace {
+
+// A standard descriptor the caller closed (`>&-`, `2>&-`) would be the lowest free one, so the next file
+// opened, the output mesh's temporary, would take it, and the summary or a warning would be written into the
+// mesh. Each closed one is taken by /dev/null opened for reading (the lowest free descriptor is that one):
+// writing to it still fails, so a closed standard output is still a failed write (exit 2, no output).
+void hold_closed_standard_descriptors() {
+  for (int fd = 0; fd <= 2; ++fd) {
+    if (fcntl(fd, F_GETFD) == -1) open("/dev/null", O_RDONLY);
+  }
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  hold_closed_standard_descriptors();
   // Past the shell's file-size limit (ulimit -f) a write fails with EFBIG, reported like any other failed
   // write, rather than the kernel killing the process without a word.
   std::signal(SIGXFSZ, SIG_IGN);
