@@ -108,6 +108,9 @@ TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
       // A budget of nothing was taken as the default (a third of RAM).
       {"simplify in.ply -o out.ply --faces 10 --memory-limit 0", "--memory-limit: '0' is less than a byte"},
       {"lod in.ply -o out.ply --faces 10 --memory-limit 0.5", "--memory-limit: '0.5' is less than a byte"},
+      // Hexadecimal, which strtod reads (16 and 1/8 here), as the integer flags and the readers refuse it.
+      {"cluster in.ply -o out.ply --cell-size 0x10", "--cell-size: '0x10' is not a finite number > 0"},
+      {"decimate in.ply -o out.ply --ratio 0x1p-3", "--ratio: '0x1p-3' is not a number in (0, 1]"},
   };
   for (const auto& c : cases) {
     const CommandResult r = run(c.args, dir);
@@ -120,6 +123,21 @@ TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
     const std::string command = std::string(c.args).substr(0, std::string(c.args).find(' '));
     EXPECT_NE(r.err.find("(see ocsimp " + command + " --help)"), std::string::npos) << r.err;
   }
+}
+
+// Whole numbers are decimal whatever their leading zeros: CLI11 read "010" as octal 8, and refused "09".
+TEST(Cli, WholeNumbersWithLeadingZerosAreDecimal) {
+  test::TempDir dir;
+  const std::string mesh = dir / "square.ply", out = dir / "out.ply";
+  write_mesh(mesh, test::grid_square(8));  // 128 faces, open: every count is reachable
+  for (const auto& [faces, expected] : {std::pair{"010", 10u}, {"09", 9u}, {"0100", 100u}}) {
+    const CommandResult r = run("decimate -q " + mesh + " -o " + out + " --faces " + faces, dir);
+    ASSERT_EQ(r.exit_code, 0) << faces << "\n" << r.err;
+    EXPECT_EQ(read_mesh(out).face_count(), expected) << faces;
+  }
+  const CommandResult r = run("cluster -q " + mesh + " -o " + out + " --octree --vertices 010", dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_mesh(out).vertex_count(), 10u);
 }
 
 TEST(Cli, TargetsThatContradictEachOtherAreRefused) {

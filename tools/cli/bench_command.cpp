@@ -41,21 +41,21 @@ void add_bench_command(CLI::App& app) {
   cmd->add_option("--repeat", flags->options.repeat,
                   "Runs per method and target; the median time is reported")
       ->capture_default_str()
-      ->check(whole_number(1, 1000));
+      ->transform(whole_number(1, 1000));
   cmd->add_option("--samples", flags->options.compare.samples, "Area samples each way for the distances")
       ->capture_default_str()
-      ->check(whole_number(1, 1'000'000'000));
+      ->transform(whole_number(1, 1'000'000'000));
   cmd->add_option("--seed", flags->options.compare.seed, "Sampling seed")
       ->capture_default_str()
-      ->check(whole_number(0));
+      ->transform(whole_number(0));
   cmd->add_option("--threads", flags->options.threads,
                   "Threads for ocsimp's methods (0 = all cores; meshoptimizer runs on one)")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_option("--distance-threads", flags->distance_threads,
                   "Threads for the distance measurement (0 = all cores; the numbers do not depend on it)")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_option("--name", flags->name,
                   "The mesh's label in the table (default: the file name without extension)");
   cmd->add_option("--json", flags->json, "Also write every number as JSON to this file")->check(file_name());

@@ -108,14 +108,17 @@ struct ProgressBar {
   }
 };
 
-// A check of a floating-point flag: its value (as CLI11 will convert it; never NaN) passes `accepts`, or the
-// message says the flag takes `wanted`.
+// A check of a floating-point flag: the whole text is a decimal number (or "inf"; never NaN) that passes
+// `accepts`, or the message says the flag takes `wanted`. Decimal, as from_chars reads it: CLI11 would also
+// take strtod's hexadecimal ("0x10" for 16), which the integer flags and the file readers refuse.
 template <class Accepts>
 CLI::Validator number_check(const std::string& wanted, Accepts accepts) {
   return CLI::Validator(
       [wanted, accepts](std::string& text) -> std::string {
         double value = 0;
-        if (CLI::detail::lexical_cast(text, value) && !std::isnan(value) && accepts(value)) return {};
+        const char* end = text.data() + text.size();
+        const auto [stop, error] = std::from_chars(text.data(), end, value);
+        if (error == std::errc() && stop == end && !std::isnan(value) && accepts(value)) return {};
         return "'" + text + "' is not " + wanted;
       },
       wanted);
@@ -164,6 +167,9 @@ CLI::Validator whole_number(std::uint64_t low, std::uint64_t high) {
         // (from_chars refuses an empty string, a sign and anything but digits.)
         if (error != std::errc() || stop != end || value < low || value > high)
           return "'" + text + "' is not " + wanted;
+        // CLI11 then converts the text as strtoull with base 0 does, reading "010" as octal 8: it gets the
+        // decimal digits alone (whole_number is a transform, so the text it leaves is what is converted).
+        text = std::to_string(value);
         return {};
       },
       wanted);

@@ -32,18 +32,18 @@ void add_cluster_command(CLI::App& app) {
       ->required();
   auto* grid = cmd->add_option("--grid", flags->options.grid, "Uniform grid: cells along the longest axis")
                    ->capture_default_str()
-                   ->check(whole_number(1, 1u << 21));
+                   ->transform(whole_number(1, 1u << 21));
   auto* cell = cmd->add_option("--cell-size", flags->options.cell_size, "Uniform grid: edge length of a cell")
                    ->check(positive_number());
   auto* faces = cmd->add_option("--faces", flags->faces,
                                 "Face budget, never exceeded. Octree: the largest face count not above it, "
                                 "by merging; uniform grid: the resolution a search finds closest below it (a "
                                 "grid's face count does not grow strictly with its resolution)")
-                    ->check(whole_number(1, std::uint64_t{1} << 40));
+                    ->transform(whole_number(1, std::uint64_t{1} << 40));
   auto* octree =
       cmd->add_flag("--octree", flags->options.octree, "Adaptive octree: needs --vertices or --faces");
   auto* vertices = cmd->add_option("--vertices", flags->vertices, "Octree: exactly this many vertices")
-                       ->check(whole_number(1, std::uint64_t{1} << 40));
+                       ->transform(whole_number(1, std::uint64_t{1} << 40));
   grid->excludes(cell);
   faces->excludes(grid)->excludes(cell);
   vertices->excludes(faces)->excludes(grid)->excludes(cell)->needs(octree);
@@ -66,7 +66,7 @@ void add_cluster_command(CLI::App& app) {
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_option("--report", flags->report, "Write cells, faces in and out, times and peak memory as JSON")
       ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");

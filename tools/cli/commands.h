@@ -31,7 +31,8 @@ void add_bench_command(CLI::App& app);
 // Checks for numeric flags, with messages that say what the flag takes. (CLI11's Range prints a double's
 // bounds with std::to_string, as "0.000000" or a few hundred digits, and an unsigned flag parses "-3" as
 // 2^64 - 3, which passed an upper bound of 2^64 - 1.)
-// Digits only, from `low` to `high`.
+// Digits only, from `low` to `high`, read as decimal: a transform (give it to ->transform, not ->check),
+// which hands CLI11 the digits without leading zeros, as CLI11 reads "010" as octal.
 CLI::Validator whole_number(std::uint64_t low,
                             std::uint64_t high = std::numeric_limits<std::uint64_t>::max());
 // A finite number >= 0; `or_infinity` also takes "inf" (no bound).
@@ -40,7 +41,7 @@ CLI::Validator non_negative_number(bool or_infinity = false);
 CLI::Validator positive_number();
 // A number in (0, 1].
 CLI::Validator fraction();
-// A --threads value: 0 (all cores) to 4096.
+// A --threads value: 0 (all cores) to 4096 (a transform, as whole_number).
 CLI::Validator thread_count();
 // A memory size parse_byte_size() takes, of at least one byte ("0" and "0.5" meant the default before).
 CLI::Validator byte_size();

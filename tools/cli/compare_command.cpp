@@ -63,10 +63,10 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("simplified", flags->simplified, "The simplified mesh")->required();
   cmd->add_option("--samples", flags->options.samples, "Area-uniform samples in each direction")
       ->capture_default_str()
-      ->check(whole_number(0, 1'000'000'000));
+      ->transform(whole_number(0, 1'000'000'000));
   cmd->add_option("--seed", flags->options.seed, "Sampling seed (same seed, same numbers)")
       ->capture_default_str()
-      ->check(whole_number(0));
+      ->transform(whole_number(0));
   cmd->add_flag(
       "--no-vertices", flags->no_vertices,
       "Do not also measure every vertex (vertices only raise the Hausdorff distance, but for a "
@@ -76,7 +76,7 @@ void add_compare_command(CLI::App& app) {
       ->check(file_name());
   cmd->add_option("--threads", flags->threads, "Threads (0 = all cores); the numbers do not depend on it")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();

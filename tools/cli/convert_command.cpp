@@ -21,10 +21,10 @@ void add_convert_command(CLI::App& app) {
   cmd->add_flag("--ascii", flags->write.ascii, "Text PLY or STL instead of binary");
   cmd->add_option("--draco-bits", flags->write.draco_position_bits, "Draco position quantization bits")
       ->capture_default_str()
-      ->check(whole_number(1, kMaxDracoPositionBits));
+      ->transform(whole_number(1, kMaxDracoPositionBits));
   cmd->add_option("--draco-level", flags->write.draco_compression_level, "Draco compression level (0..10)")
       ->capture_default_str()
-      ->check(whole_number(0, 10));
+      ->transform(whole_number(0, 10));
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const FileFormat to =

@@ -35,11 +35,11 @@ void add_decimate_command(CLI::App& app) {
       cmd->add_option(
              "--faces", o.target_faces,
              "Stop at exactly N faces (N-1 where every collapse left removes two, as on a closed manifold)")
-          ->check(whole_number(1));
+          ->transform(whole_number(1));
   cmd->add_option("--vertices", o.target_vertices,
                   "Stop at exactly N vertices (positions: the copies of one along a texture or normal seam "
                   "count once)")
-      ->check(whole_number(1));
+      ->transform(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Stop at round(R * input faces) faces, R in (0, 1]")
       ->check(fraction())
       ->excludes(faces);
@@ -76,7 +76,7 @@ void add_decimate_command(CLI::App& app) {
   add_weld_flag(cmd, o.weld);
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_option("--report", flags->report, "Write counts, statistics, times and peak memory as JSON")
       ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL instead of binary");

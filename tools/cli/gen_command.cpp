@@ -26,13 +26,16 @@ void add_gen_command(CLI::App& app) {
                   "Triangles wanted; the lattice reaches the nearest 12 n^2 per component")
       ->capture_default_str()
       // 12 n^2 at the largest n whose 6 n^2 + 2 vertices 32-bit indices number (n = 26,754).
-      ->check(whole_number(12, 8'589'318'192));
+      ->transform(whole_number(12, 8'589'318'192));
   cmd->add_option("--seed", flags->options.seed, "Random seed (same seed, same bytes)")
       ->capture_default_str()
-      ->check(whole_number(0));
-  cmd->add_option("--components", flags->options.components, "Separate blobs")->capture_default_str();
-  cmd->add_option("--holes", flags->options.holes, "Holes cut into each blob (0..6), leaving open borders")
-      ->capture_default_str();
+      ->transform(whole_number(0));
+  cmd->add_option("--components", flags->options.components, "Separate blobs")
+      ->capture_default_str()
+      ->transform(whole_number(1, 1000));
+  cmd->add_option("--holes", flags->options.holes, "Holes cut into each blob, leaving open borders")
+      ->capture_default_str()
+      ->transform(whole_number(0, 6));
   cmd->add_option("--noise", flags->options.noise, "Scanner noise, in mean edge lengths")
       ->capture_default_str();
   cmd->add_option_function<std::vector<double>>(
@@ -47,7 +50,7 @@ void add_gen_command(CLI::App& app) {
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); output does not depend on it")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_flag("-q,--quiet", flags->quiet, "No progress bar");
   cmd->callback([flags] {
     const auto start = std::chrono::steady_clock::now();

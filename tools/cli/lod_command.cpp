@@ -74,7 +74,7 @@ void add_lod_command(CLI::App& app) {
   add_weld_flag(cmd, o.decimate.weld);
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)")
       ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");

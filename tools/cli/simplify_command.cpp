@@ -56,7 +56,7 @@ void add_simplify_command(CLI::App& app) {
   CLI::Option* faces =
       cmd->add_option("--faces", o.target_faces,
                       "Exact face count (N-1 where every collapse left removes two, as on a closed manifold)")
-          ->check(whole_number(1));
+          ->transform(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
       ->check(fraction())
       ->excludes(faces);
@@ -83,7 +83,7 @@ void add_simplify_command(CLI::App& app) {
   add_weld_flag(cmd, o.decimate.weld);
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
-      ->check(thread_count());
+      ->transform(thread_count());
   cmd->add_option("--report", flags->report, "Write a JSON report of the run to this file (fields below)")
       ->check(file_name());
   cmd->add_flag("--ascii", flags->ascii, "Text PLY or STL output");
