@@ -138,6 +138,7 @@ void drop_unused_vertices(const std::vector<std::uint8_t>& used, QuadricMesh& ou
     if (!mesh.colors.empty()) mesh.colors[kept] = mesh.colors[v];
     if (!mesh.uvs.empty()) mesh.uvs[kept] = mesh.uvs[v];
     if (!out.quadrics.empty()) out.quadrics[kept] = out.quadrics[v];
+    if (!out.areas.empty()) out.areas[kept] = out.areas[v];
     ++kept;
   }
   mesh.positions.resize(kept);
@@ -145,6 +146,7 @@ void drop_unused_vertices(const std::vector<std::uint8_t>& used, QuadricMesh& ou
   if (!mesh.colors.empty()) mesh.colors.resize(kept);
   if (!mesh.uvs.empty()) mesh.uvs.resize(kept);
   if (!out.quadrics.empty()) out.quadrics.resize(kept);
+  if (!out.areas.empty()) out.areas.resize(kept);
   for (Triangle& t : mesh.triangles)
     for (Index& v : t) v = id[v];
 }
@@ -255,6 +257,9 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
   std::vector<std::uint8_t> ambiguous;  // 1 where the input showed the face in both turns
   report(options.progress, "cluster: place", 0, clusters);
   const double carried_weight = options.border_in_quadrics ? carried_border_scale(cells, options) : 0.0;
+  // With the border planes in the quadrics, each vertex says how much of its quadric is surface.
+  if (options.border_in_quadrics) out.areas.resize(clusters);
+  auto trace = [](const Quadric& q) { return q.a00 + q.a11 + q.a22; };
   if (!clustering) {
     // Every fine cell is an output vertex.
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
@@ -265,7 +270,10 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
       Attributes a;
       write_attributes(cells, i, a);
       store_attributes(cells, a, sums.points, i, mesh);
-      if (options.border_in_quadrics) cells.quadrics[i] += carried;
+      if (options.border_in_quadrics) {
+        out.areas[i] = trace(cells.quadrics[i]);
+        cells.quadrics[i] += carried;
+      }
     });
     out.quadrics = std::move(cells.quadrics);
     triangles.reserve(cells.triangles.size());
@@ -288,17 +296,20 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
     tbb::parallel_for(std::size_t{0}, clusters, [&](std::size_t c) {
       PlacementSums sums;
       Quadric surface;
+      double area = 0;
       Attributes a;
       for (std::uint32_t k = first[c]; k < first[c + 1]; ++k) {
         const std::uint32_t i = member[k];
         Quadric carried;
         sums.add(cell_placement_sums(cells, i, options.boundary_weight, carried_weight, &carried));
         surface += cells.quadrics[i];
+        area += trace(cells.quadrics[i]);
         if (options.border_in_quadrics) surface += carried;
         write_attributes(cells, i, a);
       }
       mesh.positions[c] = nearest_float(place(sums, options.representative).point);
       out.quadrics[c] = surface;
+      if (options.border_in_quadrics) out.areas[c] = area;
       store_attributes(cells, a, sums.points, c, mesh);
     });
     std::vector<CellTriangle> mapped;

@@ -140,14 +140,17 @@ constexpr std::size_t kMaxVirtualScanPerVertex = 512;
 
 struct alignas(64) Vertex {
   float p[3];
-  std::uint32_t flags;
-  Index seg_start, seg_count;  // this vertex's own segment of face ids in `vf`
-  Index seg_next;              // circular list of the segments the head vertex owns
-  Index live_faces;            // 0: removed (or never used)
-  std::uint32_t stamp, mark;   // scratch for neighbourhood maps
-  Index seg_cap;               // room in this vertex's own segment (its input valence)
-  std::uint32_t retry_asks;    // retries of its blocked edges asked since the last one done (see retry_due)
-  Quadric q;                   // relative to the local origin
+  std::uint32_t flags : 8;
+  std::uint32_t retry_asks : 24;  // retries of its blocked edges asked since the last one done (retry_due)
+  Index seg_start, seg_count;     // this vertex's own segment of face ids in `vf`
+  Index seg_next;                 // circular list of the segments the head vertex owns
+  Index live_faces;               // 0: removed (or never used)
+  std::uint32_t stamp, mark;      // scratch for neighbourhood maps
+  Index seg_cap;                  // room in this vertex's own segment (its input valence)
+  // The weight of q's surface planes alone (see QuadricMesh::areas): costs are distances over it, so the
+  // border planes' weight (boundary_weight) makes a border firmer without loosening max_error along it.
+  float area;
+  Quadric q;  // relative to the local origin
 };
 static_assert(sizeof(Vertex) == 128);
 }  // namespace
@@ -495,6 +498,15 @@ struct Decimator {
       throw Error("decimate: the quadric array has " + std::to_string(in.quadrics.size()) + " entries for " +
                   std::to_string(n) + " vertices");
     }
+    if (!in.areas.empty() && in.areas.size() != in.quadrics.size()) {
+      throw Error("decimate: the area array has " + std::to_string(in.areas.size()) + " entries for " +
+                  std::to_string(in.quadrics.size()) + " quadrics");
+    }
+    for (std::size_t v = 0; v < in.areas.size(); ++v) {
+      if (!(in.areas[v] >= 0 && in.areas[v] < std::numeric_limits<double>::infinity()))
+        throw Error("decimate: vertex " + std::to_string(v) +
+                    " has an area that is not a finite number >= 0");
+    }
     // A NaN there made every cost it touched NaN, and the error bound and the reported error 0.
     for (std::size_t v = 0; v < in.quadrics.size(); ++v) {
       const Quadric& q = in.quadrics[v];
@@ -574,6 +586,9 @@ struct Decimator {
         if (target[v] != v) in.quadrics[target[v]] += in.quadrics[v];
       }
     }
+    for (std::size_t v = 0; v < in.areas.size(); ++v) {
+      if (target[v] != v) in.areas[target[v]] += in.areas[v];
+    }
     for (Triangle& t : m.triangles) {
       for (Index& v : t) v = target[v];
     }
@@ -604,6 +619,7 @@ struct Decimator {
         x.stamp = 0;
         x.mark = 0;
         x.retry_asks = 0;
+        x.area = 0;
         x.q = Quadric{};
       }
     });
@@ -668,7 +684,7 @@ struct Decimator {
     key_scale = diagonal > 0 ? 1.0 / (diagonal * diagonal * diagonal) : 1.0;
 
     build_edges();
-    build_quadrics(in.quadrics, m.positions);
+    build_quadrics(in, m.positions);
     if (storage.keeps_source) {
       storage.seam_source.positions = std::move(m.positions);
       std::vector<std::uint8_t>().swap(storage.welded_at);
@@ -922,8 +938,9 @@ struct Decimator {
     }
   }
 
-  void build_quadrics(std::vector<Quadric>& carried, const std::vector<Vec3f>& positions) {
+  void build_quadrics(QuadricMesh& in, const std::vector<Vec3f>& positions) {
     const std::size_t nv = verts.size();
+    std::vector<Quadric>& carried = in.quadrics;
     if (!carried.empty()) {
       // Re-express around the local origin o: Q(o + y) has the same A, gradient A o + b and constant Q(o).
       const Vec3d o = origin;
@@ -936,11 +953,19 @@ struct Decimator {
           q.b2 += q.a02 * o.x() + q.a12 * o.y() + q.a22 * o.z();
           q.c = c;
           verts[v].q = q;
+          verts[v].area = static_cast<float>(surface_area(in, v));
         }
       });
       std::vector<Quadric>().swap(carried);
+      std::vector<double>().swap(in.areas);
     } else {
       face_quadrics(positions);
+      parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t v = begin; v < end; ++v) {
+          const Quadric& q = verts[v].q;
+          verts[v].area = static_cast<float>(q.a00 + q.a11 + q.a22);
+        }
+      });
     }
     std::sort(boundary_list.begin(), boundary_list.end());
     if (opt.lock_boundary) {
@@ -1150,7 +1175,7 @@ struct Decimator {
     }
     const double weight = trace(*q);
     if (opt.max_error < std::numeric_limits<double>::infinity() &&
-        error_distance(p->error, weight) > opt.max_error)
+        error_distance(p->error, double(va.area) + vb.area) > opt.max_error)
       return kIdleError;
     double cost = p->error;
     if (opt.attribute_weight > 0) {
@@ -2035,12 +2060,13 @@ struct Decimator {
     Vertex& vk = vtx[k];
     Vertex& vr = vtx[r];
 
-    stats.max_error = std::max(stats.max_error, error_distance(pl.error, trace(q)));
+    stats.max_error = std::max(stats.max_error, error_distance(pl.error, double(vk.area) + vr.area));
     interpolate_attributes(a, b, k, pl.point);
     const Vec3f placed = nearest_float(origin + pl.point);
     for (int a = 0; a < 3; ++a) vk.p[a] = placed[a];
     vk.q = {q.a00, q.a01, q.a02, q.a11, q.a12, q.a22, q.b0, q.b1, q.b2, q.c};
     vk.flags = (vk.flags | vr.flags) & kLocked;
+    vk.area += vr.area;
 
     // The kept vertex's edges, keyed by the other end.
     const std::uint32_t s = next_stamp();
@@ -2206,8 +2232,11 @@ struct Decimator {
   // millions of steps and ran for minutes. Small fans, nearly all of them, retry at every change. (The run's
   // last resort, retrying every blocked edge when the queue runs dry, still covers them all.)
   static constexpr std::uint32_t kRetryFaces = 16;
+  static constexpr std::uint32_t kMostRetryAsks = (1u << 24) - 1;  // retry_asks' range
   static bool retry_due(Vertex& v) {
-    if (++v.retry_asks * std::uint64_t{kRetryFaces} < v.live_faces) return false;
+    if (v.retry_asks < kMostRetryAsks) ++v.retry_asks;
+    if (v.retry_asks * std::uint64_t{kRetryFaces} < v.live_faces && v.retry_asks < kMostRetryAsks)
+      return false;
     v.retry_asks = 0;
     return true;
   }
@@ -2747,7 +2776,8 @@ struct Decimator {
     stats.reason = prefix + "every remaining candidate is blocked: " + why;
   }
 
-  IndexedMesh output(std::vector<Quadric>* quadrics) {
+  // With `quadrics`, also each output vertex's quadric and its surface area (see QuadricMesh::areas).
+  IndexedMesh output(std::vector<Quadric>* quadrics, std::vector<double>* areas) {
     IndexedMesh out;
     const std::size_t nv = verts.size();
     std::vector<Index> remap(nv);
@@ -2763,7 +2793,10 @@ struct Decimator {
       if (!normals.empty()) out.normals.push_back(normals[v]);
       if (!colors.empty()) out.colors.push_back(colors[v]);
       if (!uvs.empty()) out.uvs.push_back(uvs[v]);
-      if (quadrics) quadrics->push_back(absolute(verts[v].q));
+      if (quadrics) {
+        quadrics->push_back(absolute(verts[v].q));
+        areas->push_back(verts[v].area);
+      }
     }
     out.triangles.reserve(faces_alive);
     std::vector<Index> origin_of;
@@ -2883,7 +2916,8 @@ DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   arena.execute([&] { d.run(); });  // its compactions run in parallel
   d.explain();
   DecimateResult result;
-  result.mesh = d.output(options.output_quadrics ? &result.quadrics : nullptr);
+  result.mesh =
+      options.output_quadrics ? d.output(&result.quadrics, &result.areas) : d.output(nullptr, nullptr);
   result.mesh.origin = input.mesh.origin;  // build() took the arrays, not the frame they are in
   result.stats = d.stats;
   return result;

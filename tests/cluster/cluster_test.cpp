@@ -847,6 +847,11 @@ TEST(Cluster, BorderPlanesRideInTheQuadricsOnRequest) {
     // Same cells and vertices; only the quadrics differ.
     ASSERT_EQ(plain.mesh.positions, carried.mesh.positions);
     ASSERT_EQ(plain.quadrics.size(), carried.quadrics.size());
+    // Each vertex says how much of its quadric is surface: the weight the plain quadric has.
+    EXPECT_TRUE(plain.areas.empty());
+    ASSERT_EQ(carried.areas.size(), carried.quadrics.size());
+    for (std::size_t v = 0; v < carried.quadrics.size(); ++v)
+      EXPECT_EQ(carried.areas[v], surface_area(plain, v)) << v;
     std::size_t border_outputs = 0, interior_outputs = 0;
     for (std::size_t v = 0; v < carried.quadrics.size(); ++v) {
       const Vec3d p = carried.mesh.positions[v].cast<double>();

@@ -624,7 +624,7 @@ TEST(Lod, EachLevelIsTheDecimationOfThePreviousWithItsQuadricsCarried) {
   DecimateOptions second;
   second.target_faces = 800;
   second.boundary_weight = 0;  // the carried quadrics already hold the border planes level 0 added
-  const DecimateResult carried = decimate(QuadricMesh{level0.mesh, level0.quadrics}, second);
+  const DecimateResult carried = decimate(QuadricMesh{level0.mesh, level0.quadrics, level0.areas}, second);
   EXPECT_EQ(carried.mesh.positions, result.levels[1].mesh.positions);
   EXPECT_EQ(carried.mesh.triangles, result.levels[1].mesh.triangles);
   EXPECT_EQ(carried.stats.max_error, result.levels[1].decimate.max_error);

@@ -46,9 +46,9 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_option(
          "--max-error", o.max_error,
          "Apply no collapse whose cost exceeds E: the area-weighted RMS distance, in model units, from the "
-         "new "
-         "vertex to the planes of the original surface it stands for (an RMS, not a bound on the Hausdorff "
-         "distance, which is usually larger)")
+         "new vertex to the planes of the original surface it stands for, border and seam planes adding "
+         "their error at --boundary-weight (an RMS, not a bound on the Hausdorff distance, which is usually "
+         "larger)")
       ->check(non_negative_number(true));
   cmd->add_option("--pair-distance", o.pair_distance,
                   "Also join vertex pairs closer than T (model units) that share no edge")

@@ -410,16 +410,16 @@ void check_common(const SimplifyOptions& options) {
 }
 
 // The clustering stage's error, measured as the decimator measures a collapse (DecimateStats::max_error):
-// the largest over the intermediate's vertices of sqrt(Q(p) / trace(A)), each vertex's carried quadric at
-// its own position. A vertex no collapse takes keeps that error into the output. 0 when not clustered.
+// the largest over the intermediate's vertices of sqrt(Q(p) / S), each vertex's carried quadric at its own
+// position over its surface area. A vertex no collapse takes keeps that error into the output. 0 when not
+// clustered.
 double intermediate_error(const FirstStage& stage) {
   if (!stage.clustered) return 0;
   const QuadricMesh& m = stage.mesh;
   double largest = 0;
   for (std::size_t v = 0; v < m.quadrics.size(); ++v) {
-    const Quadric& q = m.quadrics[v];
-    largest = std::max(largest,
-                       error_distance(q.evaluate(m.mesh.positions[v].cast<double>()), q.a00 + q.a11 + q.a22));
+    const double error = m.quadrics[v].evaluate(m.mesh.positions[v].cast<double>());
+    largest = std::max(largest, error_distance(error, surface_area(m, v)));
   }
   return largest;
 }
@@ -643,6 +643,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     }
     input.mesh = std::move(decimated.mesh);
     input.quadrics = std::move(decimated.quadrics);
+    input.areas = std::move(decimated.areas);
     level.seconds = seconds_since(start);
     result.phases.push_back(
         {"level " + std::to_string(levels[i]), level.seconds, faces_in, level.faces, peak_rss_bytes()});

@@ -109,7 +109,8 @@ struct ClusterOptions {
   // Also add those border (and crease) planes to the output quadrics. A decimator that takes them then knows
   // the original's borders and needs no border planes of its own: the clustered mesh has spurious borders,
   // folds and overlapping triangles (where both diagonals of four cells survive) that its own would pin.
-  // The two-stage pipeline sets it and turns the decimator's border planes off.
+  // The two-stage pipeline sets it and turns the decimator's border planes off. The output's areas then say
+  // how much of each quadric is surface (QuadricMesh::areas).
   bool border_in_quadrics = false;
   // Weight of those carried planes, in the decimator's units (DecimateOptions::boundary_weight: a border edge
   // e weighs this times |e|^2, so a border weighs this times its length times the mesh's edge length). The

@@ -60,7 +60,19 @@ Vec3d far_origin(std::vector<Vec3d> first);
 struct QuadricMesh {
   IndexedMesh mesh;
   std::vector<Quadric> quadrics;
+  // Empty, or one per quadric: the weight of its surface planes alone, the area they stand for (the trace of
+  // their A), where the quadrics also hold border planes (a clustering's or a decimation's carried borders).
+  // A cost is a distance over that area (decimate.h's error_distance): over the whole trace, border planes
+  // of a large weight made every distance along a border look smaller. Empty: the whole trace is surface.
+  std::vector<double> areas = {};  // (an initializer: QuadricMesh{mesh, quadrics} leaves it empty)
 };
+
+// The area vertex v's quadric stands for (see QuadricMesh::areas).
+inline double surface_area(const QuadricMesh& m, std::size_t v) {
+  if (!m.areas.empty()) return m.areas[v];
+  const Quadric& q = m.quadrics[v];
+  return q.a00 + q.a11 + q.a22;
+}
 
 // Throws Error, its reason starting with `who` (as "decimate: "), unless every attribute array is empty or
 // has one entry a vertex and every face corner is in the vertex array: what any code that indexes the

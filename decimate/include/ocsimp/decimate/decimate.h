@@ -153,11 +153,13 @@ struct DecimateStats {
   // Rejections of the candidate at the top of the queue, over the whole run.
   std::uint64_t rejected_flip = 0;      // would flip, degenerate or double a surrounding triangle
   std::uint64_t rejected_topology = 0;  // would break the link condition (preserve_topology)
-  // The largest cost among the collapses applied, as a distance in model units: sqrt(Q(p) / trace(A)), where
-  // Q is the pair's summed quadric, p the placement and trace(A) the total weight of its planes (with area
-  // weighting, the area of original surface the two vertices stand for, plus border and fold planes). It is
-  // the area-weighted RMS distance from p to the planes of that surface, so an LOD pipeline can use it as a
-  // switching distance. error_distance() below converts.
+  // The largest cost among the collapses applied, as a distance in model units: sqrt(Q(p) / S), where Q is
+  // the pair's summed quadric, p the placement and S the weight of its surface planes alone (with area
+  // weighting, the area of original surface the two vertices stand for; see QuadricMesh::areas). Border and
+  // fold planes add to Q but not to S: they make moving a border cost more, and never make moving the
+  // surface look cheaper (over the whole weight, --boundary-weight 1000 let --max-error 1e-3 move a wavy
+  // grid's border 0.015 off). Without borders it is the area-weighted RMS distance from p to the planes of
+  // that surface, so an LOD pipeline can use it as a switching distance. error_distance() below converts.
   double max_error = 0;
   // A count target was met (exactly, or one below for parity); with max_error alone, always true (decimation
   // went as far as the bound allows).
@@ -167,7 +169,8 @@ struct DecimateStats {
 };
 
 // A quadric error as the distance DecimateStats::max_error reports: sqrt(error / weight), with `weight` the
-// trace of the quadric's A, the area its planes stand for (0 for no weight; a rounding below 0 counts as 0).
+// area its surface planes stand for (surface_area in mesh.h; 0 for no weight; a rounding below 0 counts as
+// 0).
 inline double error_distance(double error, double weight) {
   return weight > 0 ? std::sqrt(std::max(0.0, error) / weight) : 0.0;
 }
@@ -175,6 +178,7 @@ inline double error_distance(double error, double weight) {
 struct DecimateResult {
   IndexedMesh mesh;
   std::vector<Quadric> quadrics;  // per mesh vertex, when DecimateOptions::output_quadrics; else empty
+  std::vector<double> areas;      // with quadrics: their surface areas (QuadricMesh::areas)
   DecimateStats stats;
 };
 
