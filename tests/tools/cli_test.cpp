@@ -330,6 +330,17 @@ TEST(Cli, ClusterReportCountsClustersLeftOutApartFromTheOutput) {
   EXPECT_EQ(r["output"]["isolated_vertices"].get<long>(), 0);
   EXPECT_EQ(r["cells"]["left_out_without_faces"].get<long>(), 1);
   EXPECT_EQ(analyze_topology(read_mesh(out)).unreferenced_vertices, 0u);
+  // The options say what was asked for: it reported the default grid (256) for a cell size or a face target.
+  EXPECT_EQ(r["options"]["grid"].get<long>(), 4);
+  EXPECT_TRUE(r["options"]["cell_size"].is_null());
+  for (const std::string asked : {"--cell-size 0.25", "--faces 20"}) {
+    ASSERT_EQ(run("cluster -q " + (dir / "in.ply") + " -o " + out + " " + asked + " --report " + report, dir)
+                  .exit_code,
+              0);
+    const nlohmann::json j = nlohmann::json::parse(file_bytes(report));
+    EXPECT_TRUE(j["options"]["grid"].is_null()) << asked;
+    EXPECT_EQ(j["options"]["cell_size"].is_null(), asked != "--cell-size 0.25") << asked;
+  }
 }
 
 // A textured mesh decimates with its seams kept: the report tells the file's vertices from the positions
@@ -709,6 +720,16 @@ TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
   EXPECT_EQ(o.exit_code, 0) << o.err;
   EXPECT_EQ(o.err.find("span"), std::string::npos) << o.err;
   EXPECT_NE(o.err.find("has no faces"), std::string::npos) << o.err;
+  // Nor with a target, which the finest grid misses (it blamed vertices no face uses, of which there are
+  // none).
+  point.positions.assign(300, Vec3f(1, 2, 3));
+  point.triangles.clear();
+  for (Index v = 0; v < 300; v += 3) point.triangles.push_back({v, v + 1, v + 2});
+  write_mesh(one, point);
+  const CommandResult ot = run("cluster -q --faces 50 " + one + " -o " + result, dir);
+  EXPECT_EQ(ot.exit_code, 0) << ot.err;
+  EXPECT_EQ(ot.err.find("stretch"), std::string::npos) << ot.err;
+  EXPECT_NE(ot.err.find("every vertex lies in one cell of the finest grid"), std::string::npos) << ot.err;
   // A target the finest grid cannot reach, for the same reason: the warning names the input and the cause.
   const std::string sphere = dir / "sphere.ply";
   IndexedMesh far = test::sphere(3);

@@ -131,15 +131,19 @@ void add_cluster_command(CLI::App& app) {
                           {"vertices", stats.output_vertices},
                           {"faces", stats.output_faces},
                           {"isolated_vertices", kept ? stats.isolated_vertices : 0}};
-      report["options"] = {{"mode", options.octree ? "octree" : "grid"},
-                           {"grid", options.grid},
-                           {"cell_size", options.cell_size},
-                           {"target_faces", options.target_faces},
-                           {"target_vertices", options.target_vertices},
-                           {"representative", representative_name(options.representative)},
-                           {"boundary", options.preserve_boundary},
-                           {"boundary_weight", options.boundary_weight},
-                           {"threads", options.threads}};
+      // The grid and cell size asked for, null where not (the cells used are under "cells").
+      const bool by_grid = !options.octree && options.target_faces == 0 && !(options.cell_size > 0);
+      const bool by_size = !options.octree && options.target_faces == 0 && options.cell_size > 0;
+      report["options"] = {
+          {"mode", options.octree ? "octree" : "grid"},
+          {"grid", by_grid ? nlohmann::json(options.grid) : nlohmann::json(nullptr)},
+          {"cell_size", by_size ? nlohmann::json(options.cell_size) : nlohmann::json(nullptr)},
+          {"target_faces", options.target_faces},
+          {"target_vertices", options.target_vertices},
+          {"representative", representative_name(options.representative)},
+          {"boundary", options.preserve_boundary},
+          {"boundary_weight", options.boundary_weight},
+          {"threads", options.threads}};
       report["cells"] = {
           {"fine", stats.fine_cells},         {"fine_grid", stats.fine_grid},
           {"spanned", stats.spanned_cells},   {"fine_cell_size", stats.fine_cell_size},
@@ -186,6 +190,11 @@ void add_cluster_command(CLI::App& app) {
                    " cells, " + size +
                    " wide, keep few of the faces (a face whose corners share a cell collapses, and parts "
                    "thinner than a cell lose all theirs); --cell-size or --grid sets smaller cells");
+    } else if (!stats.target_met && stats.fine_cells <= 1) {
+      // Not a stretched box: a box of one point spans one cell of every grid.
+      console.warn(std::string("the ") + (flags->vertices ? "vertex" : "face") +
+                   " target was not reached: every vertex lies in one cell of the finest grid (the input has "
+                   "no extent to cluster)");
     } else if (!stats.target_met) {
       std::string note = std::string("the ") + (flags->vertices ? "vertex" : "face") +
                          " target was not reached (the finest grid has " + std::to_string(stats.fine_cells) +
