@@ -388,7 +388,12 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
     const double vertices = options.octree && options.target_vertices > 0
                                 ? static_cast<double>(options.target_vertices)
                                 : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
-    const double fine = std::max(64.0, options.fine_cells_per_target * vertices);
+    // A uniform grid's face target picks among the coarser grids that groups of fine cells make, so a
+    // small target needs more fine cells than its vertices would ask for to have resolutions to choose
+    // from: at 64 cells, bunny --faces 10 had 4 fine cells along its box and every choice gave 0 faces or
+    // over 10. The octree merges one cell at a time and reaches any count from its target's own cells.
+    const double least = options.octree ? 64.0 : 4096.0;
+    const double fine = std::max(least, options.fine_cells_per_target * vertices);
     pass.target_cells = static_cast<std::uint64_t>(std::min(fine, 2e9));
     // A face target asks for as many fine cells as faces: a thin strip whose cross-section fit in one cell
     // had more cells than the target's vertices, yet every triangle collapsed within them, and the output

@@ -111,6 +111,26 @@ Clustering regrid_to_faces(const FineCells& cells, std::uint64_t target_faces) {
     last = mid;
     last_faces = static_cast<double>(faces);
   }
+  // Small counts jump about with the resolution (a leg falls into one cell or two; at 9 to 14 faces asked
+  // for, the horse's counts went 0, 2, 16, ...), and the search above can close its bracket on a count far
+  // below the target, or on none (bunny --faces 10 gave 0 faces where a grid gives 8). Then resolutions
+  // spread evenly in log terms over the whole range get a look too, as many as a budget of fine-triangle
+  // visits allows: hundreds where the fine grid is small, which is where counts jump, none past a few
+  // million fine triangles, where they grow smoothly and the search lands close.
+  constexpr double kSweepVisits = 4e6;
+  constexpr int kMostSweeps = 256;
+  if (best_faces < target_faces) {
+    const int sweeps = static_cast<int>(
+        std::min<double>(kMostSweeps, kSweepVisits / std::max<double>(1, cells.triangles.size())));
+    for (int i = 0; i < sweeps; ++i) {
+      const double along = std::pow(fine, (i + 0.5) / sweeps);
+      const std::size_t faces = count_faces(cells.triangles, regrid(cells, along));
+      if (faces <= target_faces && faces > best_faces) {
+        best = along;
+        best_faces = faces;
+      }
+    }
+  }
   Clustering result = regrid(cells, best);
   result.target_met = true;
   return result;
