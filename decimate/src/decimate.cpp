@@ -137,6 +137,15 @@ constexpr double kRefCos2 = 0.25;
 constexpr double kFoldCos = -0.5;
 constexpr std::size_t kMaxVirtualPairsPerVertex = 8;
 constexpr std::size_t kMaxVirtualScanPerVertex = 512;
+constexpr int kMaxVirtualRings = 8;
+// The weight of a crack's border planes (a border that virtual pairs will close, see cracks_paired) relative
+// to a border's. At full weight they stay after the crack closes, and the planes through the edges of a
+// curved surface all pass near its centre of curvature, where they pulled the joined vertices: a triangle
+// soup with its corners 1e-6 apart (every edge a border), joined at --pair-distance 1e-5 and decimated to
+// 30 %, sank 0.25 into a unit sphere (its welded copy: 0.015). Without them, a soup's triangles vanish
+// whole at no cost before their corners join. At 1e-3 they still keep each side until the pairs join it
+// (nearly free), and leave the joined surface 0.017 off.
+constexpr double kCrackWeight = 1e-3;
 
 struct alignas(64) Vertex {
   float p[3];
@@ -684,13 +693,14 @@ struct Decimator {
     key_scale = diagonal > 0 ? 1.0 / (diagonal * diagonal * diagonal) : 1.0;
 
     build_edges();
+    // The pairs first: the border planes leave out the cracks they will close.
+    if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
     build_quadrics(in, m.positions);
     if (storage.keeps_source) {
       storage.seam_source.positions = std::move(m.positions);
       std::vector<std::uint8_t>().swap(storage.welded_at);
     }
     std::vector<Vec3f>().swap(m.positions);
-    if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
   }
 
   // Of an edge's sides, the face of the one that has area when all the others have none; else kNone.
@@ -974,12 +984,21 @@ struct Decimator {
         verts[edges[e].v[1]].flags |= kLocked;
       }
     }
+    const std::vector<std::uint8_t> crack = cracks_paired();
+    if (!crack.empty()) {
+      // A face whose sides are all cracks joins its neighbours: not a separate face (separate_faces_note).
+      std::vector<std::uint8_t> open_sides(faces.size(), 0);
+      stats.separate_faces = 0;
+      for (std::size_t i = 0; i < boundary_list.size(); ++i)
+        stats.separate_faces += !crack[i] && ++open_sides[boundary_list[i].second] == 3;
+    }
     // A fold is a border of each of its two sheets: plane quadrics cannot see a flap move along the surface
     // it lies on (its planes are nearly parallel), so both get the border's perpendicular planes.
     std::sort(fold_list.begin(), fold_list.end());
     boundary_list.insert(boundary_list.end(), fold_list.begin(), fold_list.end());
     std::vector<std::pair<Index, Index>>().swap(fold_list);
-    for (const auto& [e, f] : boundary_list) {
+    for (std::size_t i = 0; i < boundary_list.size(); ++i) {
+      const auto [e, f] = boundary_list[i];
       const Index v = edges[e].v[0], w = edges[e].v[1];
       if (!(opt.boundary_weight > 0)) continue;
       const Vec3d normal = face_normal(f);
@@ -988,7 +1007,8 @@ struct Decimator {
       const double length = side.norm();
       if (!(length > 0)) continue;
       side /= length;
-      const double weight = opt.boundary_weight * (opt.area_weighting ? d.squaredNorm() : 1.0);
+      const double weight = opt.boundary_weight * (opt.area_weighting ? d.squaredNorm() : 1.0) *
+                            (i < crack.size() && crack[i] ? kCrackWeight : 1.0);
       const Quadric q = Quadric::plane(side, -side.dot(rel(v)), weight);
       add_to(verts[v].q, q);
       add_to(verts[w].q, q);
@@ -996,11 +1016,61 @@ struct Decimator {
     std::vector<std::pair<Index, Index>>().swap(boundary_list);
   }
 
-  // Pairs closer than pair_distance sharing no edge, found in a uniform grid of that cell size: each vertex
-  // keeps its nearest few among higher-numbered vertices.
+  // Which borders of boundary_list (sorted, before the folds join it) are one side of a crack that the pairs
+  // will close: another border runs between the edge's ends or their pair partners. Such a border's planes
+  // weigh kCrackWeight of a border's (see there). Empty without pairs.
+  std::vector<std::uint8_t> cracks_paired() const {
+    if (virtual_pairs.empty()) return {};
+    std::vector<std::pair<Index, Index>> borders(boundary_list.size());
+    for (std::size_t i = 0; i < boundary_list.size(); ++i) {
+      const Edge& e = edges[boundary_list[i].first];
+      borders[i] = {std::min(e.v[0], e.v[1]), std::max(e.v[0], e.v[1])};
+    }
+    std::vector<std::pair<Index, Index>> sorted = borders;
+    std::sort(sorted.begin(), sorted.end());
+    std::vector<std::uint8_t> crack(borders.size(), 0);
+    std::vector<Index> near_v, near_w;
+    auto with_partners = [&](Index v, std::vector<Index>& out) {
+      out.assign(1, v);
+      for (Index e : virtual_pairs[v]) out.push_back(edges[e].v[0] == v ? edges[e].v[1] : edges[e].v[0]);
+    };
+    for (std::size_t i = 0; i < borders.size(); ++i) {
+      const auto [v, w] = borders[i];
+      with_partners(v, near_v);
+      with_partners(w, near_w);
+      for (Index a : near_v) {
+        for (Index b : near_w) {
+          const std::pair<Index, Index> other{std::min(a, b), std::max(a, b)};
+          if (a != b && other != borders[i] && std::binary_search(sorted.begin(), sorted.end(), other)) {
+            crack[i] = 1;
+          }
+        }
+      }
+    }
+    return crack;
+  }
+
+  // Pairs closer than pair_distance sharing no edge: each vertex's nearest few (kMaxVirtualPairsPerVertex),
+  // found in a uniform grid ring by ring outward, so the nearest come first whatever the distance. The
+  // cells are pair_distance wide, or the mean edge length where that is smaller: cells of a large
+  // pair_distance held the whole mesh, whose first vertices in index order filled the scan's budget, and a
+  // soup's copies 1e-6 apart went unpaired at --pair-distance 1 while paired at 0.1.
   void build_virtual_pairs() {
     const std::size_t nv = verts.size();
-    const double cell = opt.pair_distance;
+    double edge_sum = 0;
+    std::size_t edge_count = 0;
+    for (const Edge& e : edges) {
+      const double length = (rel(e.v[1]) - rel(e.v[0])).norm();
+      if (length > 0) {
+        edge_sum += length;
+        ++edge_count;
+      }
+    }
+    const double limit = opt.pair_distance;
+    const double cell = edge_count > 0 ? std::min(limit, edge_sum / double(edge_count)) : limit;
+    // Rings wider than the limit hold nothing to pair; past kMaxVirtualRings (a ring of that radius has
+    // about 1,400 cells) a vertex with fewer than its share of pairs keeps what it found.
+    const int rings = static_cast<int>(std::min<double>(kMaxVirtualRings, std::ceil(limit / cell)));
     struct Cell {
       std::int64_t x, y, z;
       Index v;
@@ -1024,7 +1094,7 @@ struct Decimator {
     tbb::parallel_sort(cells.begin(), cells.end());
     constexpr std::size_t grain = 4096;
     std::vector<std::vector<std::pair<Index, Index>>> chunk_pairs((cells.size() + grain - 1) / grain);
-    const double limit2 = cell * cell;
+    const double limit2 = limit * limit;
     parallel_chunks(cells.size(), grain, [&](std::size_t begin, std::size_t end) {
       std::vector<std::pair<double, Index>> near;
       std::vector<Index> linked;
@@ -1032,43 +1102,47 @@ struct Decimator {
       for (std::size_t i = begin; i < end; ++i) {
         const Index v = cells[i].v;
         const Vec3d p = rel(v);
-        near.clear();
-        std::size_t scanned = 0;
-        for (int dx = -1; dx <= 1; ++dx) {
-          for (int dy = -1; dy <= 1; ++dy) {
-            for (int dz = -1; dz <= 1; ++dz) {
-              const Cell key{cells[i].x + dx, cells[i].y + dy, cells[i].z + dz, 0};
-              for (auto it = std::lower_bound(cells.begin(), cells.end(), key);
-                   it != cells.end() && it->x == key.x && it->y == key.y && it->z == key.z &&
-                   scanned < kMaxVirtualScanPerVertex;
-                   ++it, ++scanned) {
-                if (it->v <= v) continue;
-                const double d2 = (rel(it->v) - p).squaredNorm();
-                if (d2 < limit2) near.emplace_back(d2, it->v);
-              }
-            }
-          }
-        }
-        if (near.empty()) continue;
         linked.clear();
         const Vertex& x = verts[v];
         for (Index k = x.seg_start; k < x.seg_start + x.seg_count; ++k) {
           for (Index w : faces[vf[k]].v) linked.push_back(w);
         }
         std::sort(linked.begin(), linked.end());
-        std::sort(near.begin(), near.end());
-        std::size_t taken = 0;
-        for (const auto& [d2, w] : near) {
-          if (taken == kMaxVirtualPairsPerVertex) break;
-          if (std::binary_search(linked.begin(), linked.end(), w)) continue;
-          out.emplace_back(v, w);
-          ++taken;
+        near.clear();
+        std::size_t scanned = 0;
+        for (int r = 0; r <= rings && scanned < kMaxVirtualScanPerVertex; ++r) {
+          for (int dx = -r; dx <= r; ++dx) {
+            for (int dy = -r; dy <= r; ++dy) {
+              for (int dz = -r; dz <= r; ++dz) {
+                if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != r) continue;
+                const Cell key{cells[i].x + dx, cells[i].y + dy, cells[i].z + dz, 0};
+                for (auto it = std::lower_bound(cells.begin(), cells.end(), key);
+                     it != cells.end() && it->x == key.x && it->y == key.y && it->z == key.z &&
+                     scanned < kMaxVirtualScanPerVertex;
+                     ++it, ++scanned) {
+                  if (it->v == v || std::binary_search(linked.begin(), linked.end(), it->v)) continue;
+                  const double d2 = (rel(it->v) - p).squaredNorm();
+                  if (d2 < limit2) near.emplace_back(d2, it->v);
+                }
+              }
+            }
+          }
+          // Whatever lies beyond ring r is at least r cells away: done once the nearest few are nearer.
+          if (near.size() >= kMaxVirtualPairsPerVertex) {
+            std::nth_element(near.begin(), near.begin() + (kMaxVirtualPairsPerVertex - 1), near.end());
+            const double bound = r * cell;
+            if (near[kMaxVirtualPairsPerVertex - 1].first <= bound * bound) break;
+          }
         }
+        std::sort(near.begin(), near.end());
+        if (near.size() > kMaxVirtualPairsPerVertex) near.resize(kMaxVirtualPairsPerVertex);
+        for (const auto& [d2, w] : near) out.emplace_back(std::min(v, w), std::max(v, w));
       }
     });
     std::vector<std::pair<Index, Index>> pairs;
     for (auto& chunk : chunk_pairs) pairs.insert(pairs.end(), chunk.begin(), chunk.end());
     std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());  // found from both ends
     if (edges.size() + pairs.size() >= first_state) throw Error("decimate: too many candidate pairs");
     virtual_pairs.assign(nv, {});
     const std::size_t base = edges.size();

@@ -54,8 +54,9 @@ struct DecimateOptions {
   double max_error = std::numeric_limits<double>::infinity();
 
   // Candidate pairs: every edge, plus (when > 0) vertex pairs closer than this distance in model units that
-  // share no edge, so separate parts can join (Garland & Heckbert 1997). Each vertex gets at most 8 such
-  // pairs, its nearest.
+  // share no edge, so separate parts can join (Garland & Heckbert 1997): each vertex's 8 nearest (a few
+  // more where it is also another's nearest). A border that such pairs will close (another border runs
+  // between its ends' partners: a crack, a soup's shared edge) keeps only a trace of its border planes.
   double pair_distance = 0;
 
   // Boundary edges (used by one face) add to both endpoint quadrics a plane through the edge, perpendicular
