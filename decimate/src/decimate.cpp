@@ -57,6 +57,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <numeric>
 #include <string>
 #include <vector>
@@ -603,8 +604,14 @@ struct Decimator {
     }
   }
 
+  // The setup's steps, reported as the "decimate: setup" phase: on a 4 M-face scan they and the first round
+  // of regions took half the run before the "decimate" phase said anything.
+  static constexpr std::uint64_t kSetupSteps = 5;
+
   void build(QuadricMesh& in) {
+    report(opt.progress, "decimate: setup", 0, kSetupSteps);
     validate_and_clean(in);
+    report(opt.progress, "decimate: setup", 1, kSetupSteps);
     IndexedMesh& m = in.mesh;
     const std::size_t nv = m.positions.size();
     const std::size_t nf = m.triangles.size();
@@ -685,6 +692,7 @@ struct Decimator {
       });
     }
     stats.input_vertices = verts_alive;
+    report(opt.progress, "decimate: setup", 2, kSetupSteps);
 
     origin = box.center();
     box_low = box.lo;
@@ -695,7 +703,9 @@ struct Decimator {
     build_edges();
     // The pairs first: the border planes leave out the cracks they will close.
     if (opt.pair_distance > 0 && !opt.preserve_topology) build_virtual_pairs();
+    report(opt.progress, "decimate: setup", 3, kSetupSteps);
     build_quadrics(in, m.positions);
+    report(opt.progress, "decimate: setup", 4, kSetupSteps);
     if (storage.keeps_source) {
       storage.seam_source.positions = std::move(m.positions);
       std::vector<std::uint8_t>().swap(storage.welded_at);
@@ -2379,6 +2389,7 @@ struct Decimator {
     compact_below = virtual_pairs.empty() ? stats.input_vertices / 2 : 0;
     if (!use_first_phase()) {
       build_heap();
+      report(opt.progress, "decimate: setup", kSetupSteps, kSetupSteps);
       return;
     }
     parallel_chunks(edges.size(), 65536, [&](std::size_t begin, std::size_t end) {
@@ -2607,9 +2618,11 @@ struct Decimator {
       workers.push_back(std::move(w));
     }
     build_region_heaps(workers, ids.data());
+    if (pass == 0) report(opt.progress, "decimate: setup", kSetupSteps, kSetupSteps);
 
     const std::uint64_t expected = expected_collapses();
     std::uint64_t done = 0;
+    RoundProgress progress(opt.progress, stats.collapses, expected);
     std::vector<float> sample;
     std::vector<std::pair<std::size_t, std::size_t>> order;  // (expected work, region)
     for (int round = 0; round < kRounds; ++round) {
@@ -2654,7 +2667,7 @@ struct Decimator {
           std::min<std::size_t>(order.size(), std::max(1, tbb::this_task_arena::max_concurrency())));
       tbb::parallel_for(0, lanes, [&](int) {
         for (std::size_t i = next++; i < order.size(); i = next++)
-          workers[order[i].second]->run_region(threshold);
+          workers[order[i].second]->run_region(threshold, progress);
       });
       done = 0;
       for (const auto& w : workers) done += w->stats.collapses;
@@ -2685,8 +2698,34 @@ struct Decimator {
     return (target_f > 0 && faces_alive <= target_f + 2) || (target_v > 0 && verts_alive <= target_v + 2);
   }
 
-  void run_region(float threshold) {
-    while (!heap.empty() && !region_done() && heap.top().key <= threshold) try_top(false);
+  // The collapses of a round's regions, added up across threads as they go and reported by whichever
+  // thread finds no other reporting: a round of a large mesh's regions can take seconds.
+  struct RoundProgress {
+    RoundProgress(const ProgressFn& f, std::uint64_t b, std::uint64_t e) : fn(f), before(b), expected(e) {}
+    const ProgressFn& fn;
+    std::uint64_t before, expected;  // collapses before the pass; expected in all
+    std::atomic<std::uint64_t> done{0};
+    std::mutex reporting;
+
+    void add(std::uint64_t collapses) {
+      const std::uint64_t now = done += collapses;
+      if (!fn || !reporting.try_lock()) return;
+      report(fn, "decimate", before + now, std::max(expected, before + now));
+      reporting.unlock();
+    }
+  };
+
+  void run_region(float threshold, RoundProgress& progress) {
+    constexpr std::uint64_t kReportEvery = 1024;
+    std::uint64_t reported = stats.collapses;
+    while (!heap.empty() && !region_done() && heap.top().key <= threshold) {
+      try_top(false);
+      if (stats.collapses - reported >= kReportEvery) {
+        progress.add(stats.collapses - reported);
+        reported = stats.collapses;
+      }
+    }
+    progress.done += stats.collapses - reported;
   }
 
   // The global queue: the pairs still queued in the regions keep their keys; pending and deferred pairs are
