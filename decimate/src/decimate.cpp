@@ -2802,6 +2802,14 @@ struct Decimator {
                                   " is unreachable: no remaining collapse removes a single face)"
                       : already ? " (the input is already within the target: nothing was collapsed)"
                                 : "");
+      // With both count targets, whichever is met first stops the run: say which, as the other is not met.
+      const bool faces_met = faces_alive <= target_f, vertices_met = verts_alive <= target_v;
+      if (target_f > 0 && target_v > 0 && faces_met != vertices_met) {
+        const std::string faces = "the face target " + std::to_string(target_f),
+                          vertices = "the vertex target " + std::to_string(target_v);
+        stats.reason += faces_met ? " (" + faces + " was met first; " + vertices + " was not)"
+                                  : " (" + vertices + " was met first; " + faces + " was not)";
+      }
       return;
     }
     // A blocked pair whose cost exceeds the error bound would not be collapsed without its guard either: it

@@ -212,6 +212,31 @@ TEST(Decimate, KeepsTheFrameOfAMeshFarFromZero) {
   EXPECT_EQ(run(at_zero, faces(500)).mesh.positions, r.mesh.positions);
 }
 
+// Both count targets: the first met stops the run, and the reason says which, since the other is not met
+// (a vertex target above the input left it whole, reported as the target reached and nothing more).
+TEST(Decimate, WithBothCountTargetsTheReasonNamesTheOneMet) {
+  const IndexedMesh sphere = test::sphere(4);  // 5,120 faces, 2,562 vertices
+  DecimateOptions o = faces(1000);
+  o.target_vertices = 800;  // met at about 1,600 faces
+  const DecimateResult by_vertices = run(sphere, o);
+  EXPECT_EQ(by_vertices.mesh.vertex_count(), 800u);
+  EXPECT_GT(by_vertices.mesh.face_count(), 1000u);
+  EXPECT_NE(
+      by_vertices.stats.reason.find("the vertex target 800 was met first; the face target 1000 was not"),
+      std::string::npos)
+      << by_vertices.stats.reason;
+  o.target_vertices = 1'000'000;
+  const DecimateResult whole = run(sphere, o);
+  EXPECT_EQ(whole.mesh.face_count(), sphere.face_count());
+  EXPECT_NE(whole.stats.reason.find("the vertex target 1000000 was met first"), std::string::npos)
+      << whole.stats.reason;
+  o.target_vertices = 300;  // the face target comes first
+  const DecimateResult by_faces = run(sphere, o);
+  EXPECT_EQ(by_faces.mesh.face_count(), 1000u);
+  EXPECT_NE(by_faces.stats.reason.find("the face target 1000 was met first"), std::string::npos)
+      << by_faces.stats.reason;
+}
+
 TEST(Decimate, ExactVertexCounts) {
   const IndexedMesh sphere = test::sphere(4);
   for (std::uint64_t target : {1000u, 301u, 4u}) {

@@ -38,7 +38,7 @@ void add_decimate_command(CLI::App& app) {
           ->transform(whole_number(1));
   cmd->add_option("--vertices", o.target_vertices,
                   "Stop at exactly N vertices (positions: the copies of one along a texture or normal seam "
-                  "count once)")
+                  "count once); with --faces or --ratio too, at whichever target is met first")
       ->transform(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Stop at round(R * input faces) faces, R in (0, 1]")
       ->check(fraction())
