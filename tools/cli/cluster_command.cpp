@@ -53,7 +53,9 @@ void add_cluster_command(CLI::App& app) {
          "minimizer kept inside the cell) or mean (average of the cell's vertices)")
       ->check(CLI::IsMember({"quadric", "constrained", "mean"}))
       ->capture_default_str();
-  cmd->add_flag("--no-boundary", flags->no_boundary, "Do not hold open borders in place");
+  cmd->add_flag("--no-boundary", flags->no_boundary,
+                "Do not hold open borders in place, nor fit representatives to sharp creases (the same edge "
+                "planes serve both, so this changes closed meshes too)");
   cmd->add_option("--boundary-weight", flags->options.boundary_weight,
                   "Weight of a border crossing against a cell's worth of surface")
       ->capture_default_str()
