@@ -13,6 +13,8 @@
 namespace ocsimp::detail {
 
 ByteReader::ByteReader(std::string path, std::size_t capacity) : path_(std::move(path)) {
+  // An error names its file first, and an empty name would leave the message naming nothing.
+  if (path_.empty()) throw Error("cannot open '': an empty file name");
   // Without O_NONBLOCK, opening a FIFO that no process writes waits for one forever, before the check below
   // could refuse it. A regular file's reads ignore the flag.
   fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);

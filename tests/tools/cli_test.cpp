@@ -507,6 +507,13 @@ TEST(Cli, BadInputGivesOneLineNamingTheFileAndExit2) {
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_EQ(lines(missing.err), 1u);
   EXPECT_NE(missing.err.find("nope.ply"), std::string::npos);
+
+  // An empty name is named too (the message named no file: "cannot open: No such file or directory").
+  for (const char* command : {"info ''", "cluster '' -o out.ply --grid 4"}) {
+    const CommandResult empty = run(command, dir);
+    EXPECT_EQ(empty.exit_code, 2) << command;
+    EXPECT_EQ(empty.err, "ocsimp: cannot open '': an empty file name\n") << command;
+  }
 }
 
 // A strip one cell wide clusters to vertices only: the run succeeds, writes them, and says on stderr (even
