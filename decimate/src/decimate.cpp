@@ -1598,7 +1598,8 @@ struct Decimator {
       }
       try_top(overshoot);
     }
-    report(opt.progress, "decimate", stats.collapses, std::max(expected, stats.collapses));
+    // Done, whether at the target or stopped short of it (an error bound, guards): the bar ends full.
+    report(opt.progress, "decimate", stats.collapses, stats.collapses);
   }
 
   // Survivors are scattered over arrays sized for the input: past 10 % of the input, collapses cost about

@@ -1070,6 +1070,14 @@ TEST(Decimate, ReportsProgressThroughTheSetupAndTheRegions) {
   EXPECT_GE(early, 5u);  // several before half the collapses are done
   EXPECT_EQ(reports.back().phase, "decimate");
   EXPECT_EQ(reports.back().done, reports.back().total);
+  // Stopped short of its target by an error bound, the phase still ends complete (a bar was left at 58 %).
+  reports.clear();
+  o.max_error = 1e-4;
+  const DecimateResult bounded = run(sphere, o);
+  ASSERT_EQ(bounded.stats.stop, DecimateStop::max_error);
+  EXPECT_EQ(reports.back().phase, "decimate");
+  EXPECT_EQ(reports.back().done, reports.back().total);
+  EXPECT_EQ(reports.back().done, bounded.stats.collapses);
 }
 
 // ------------------------------------------------------------------ error bound

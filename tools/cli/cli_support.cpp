@@ -42,6 +42,9 @@ struct ProgressBar {
     last_draw = now;
     const double seconds = std::chrono::duration<double>(now - phase_start).count();
     const double rate = seconds > 0 ? static_cast<double>(done) / seconds : 0.0;
+    // A rate over less than a tenth of a second says nothing ("write 100.0%  0 faces/s"): left blank.
+    const bool timed = seconds >= 0.1;
+    const std::string speed = timed ? human(rate) + unit(phase) + "/s" : "";
     // A line longer than the terminal wraps, and the next '\r' then returns only to its last row: every
     // redraw scrolled a row on an 80-column terminal. So the bar narrows to fit, and the line is cut to the
     // width if that is not enough; the width is asked each time, since the window may be resized.
@@ -53,8 +56,11 @@ struct ProgressBar {
       const double fraction = std::min(1.0, static_cast<double>(done) / static_cast<double>(total));
       const double left = rate > 0 ? static_cast<double>(total - std::min(done, total)) / rate : 0.0;
       char rest[96];
-      std::snprintf(rest, sizeof rest, " %5.1f%%  %s%s/s  %4.0fs left ", 100.0 * fraction,
-                    human(rate).c_str(), unit(phase), left);
+      if (timed) {
+        std::snprintf(rest, sizeof rest, " %5.1f%%  %s  %4.0fs left ", 100.0 * fraction, speed.c_str(), left);
+      } else {
+        std::snprintf(rest, sizeof rest, " %5.1f%% ", 100.0 * fraction);
+      }
       // The widest the rest gets (human() gives at most 6 characters below 1000G, and 4 digits of seconds),
       // so that the bar keeps its width from one redraw to the next.
       const std::size_t others = std::max<std::size_t>(phase.size(), 17) + 3 +
@@ -67,8 +73,8 @@ struct ProgressBar {
       bar[width] = 0;
       std::snprintf(line, sizeof line, "\r%-17s [%s]%s", phase.c_str(), bar, rest);
     } else {
-      std::snprintf(line, sizeof line, "\r%-17s %s%s  %s%s/s ", phase.c_str(),
-                    human(static_cast<double>(done)).c_str(), unit(phase), human(rate).c_str(), unit(phase));
+      std::snprintf(line, sizeof line, "\r%-17s %s%s  %s ", phase.c_str(),
+                    human(static_cast<double>(done)).c_str(), unit(phase), speed.c_str());
     }
     // Columns, plus the leading '\r', less one so the cursor stays on the row.
     if (columns > 1 && std::strlen(line) > columns) line[columns] = 0;
@@ -87,8 +93,8 @@ struct ProgressBar {
   // What the stages count (core/system.h leaves units to the phase): readers and the cluster pass report
   // bytes of input, the decimator collapses, writers faces.
   static const char* unit(std::string_view phase) {
-    if (phase.starts_with("read") || phase == "cluster: faces" || phase.starts_with("dereference"))
-      return "B";
+    if (phase.starts_with("read") || phase == "cluster: faces") return "B";
+    if (phase == "dereference") return " partitions";  // of the vertex array, each a pass over the faces
     if (phase == "decimate") return " collapses";
     if (phase == "write" || phase == "generate") return " faces";
     return "";
