@@ -26,7 +26,15 @@ std::atomic<bool> g_used[kMaxLive];
 std::mutex g_live_mutex;
 std::once_flag g_handlers_installed;
 
+// SignalsDeferred scopes alive, and the signal one of them holds back (0: none).
+std::atomic<int> g_deferring{0};
+std::atomic<int> g_deferred_signal{0};
+
 extern "C" void remove_temporaries_and_die(int signal_number) {
+  if (g_deferring.load() > 0) {
+    g_deferred_signal.store(signal_number);
+    return;
+  }
   for (int i = 0; i < kMaxLive; ++i) {
     if (g_used[i].load()) unlink(g_live[i]);
   }
@@ -135,7 +143,7 @@ std::string give_name(int fd, const std::string& pattern, const std::string& pat
 }
 
 // Names a finished file if it has no name yet, closes it and renames it over its target.
-void publish(FinishedFile& file) {
+void publish_now(FinishedFile& file) {
   if (file.unnamed) {
     file.temp_path = give_name(file.fd, file.temp_path, file.path);
     file.unnamed = false;
@@ -147,6 +155,10 @@ void publish(FinishedFile& file) {
     throw Error(file.path, {}, system_reason("cannot rename the finished temporary into place"));
   unregister_live(file.temp_path);
   file.temp_path.clear();
+}
+
+void publish(FinishedFile& file) {
+  with_signals_deferred([&] { publish_now(file); });  // no name left unregistered
 }
 
 // Deletes a finished file that was not published: an unnamed one is gone with its descriptor.
@@ -306,6 +318,19 @@ HeldCommits::~HeldCommits() {
   for (FinishedFile& file : files_) discard(file);
 }
 
+void with_signals_deferred(const std::function<void()>& work) {
+  std::call_once(g_handlers_installed, install_handlers);
+  ++g_deferring;
+  struct Resume {
+    ~Resume() {
+      if (--g_deferring == 0) {
+        if (const int signal_number = g_deferred_signal.exchange(0)) ::raise(signal_number);
+      }
+    }
+  } resume;
+  work();
+}
+
 void HeldCommits::release() {
   {
     std::lock_guard lock(g_held_mutex);
@@ -313,7 +338,9 @@ void HeldCommits::release() {
   }
   std::size_t i = 0;
   try {
-    for (; i < files_.size(); ++i) publish(files_[i]);
+    with_signals_deferred([&] {  // all of them or none
+      for (; i < files_.size(); ++i) publish(files_[i]);
+    });
   } catch (...) {
     for (std::size_t j = i; j < files_.size(); ++j) discard(files_[j]);
     files_.clear();

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <csignal>
 #include <filesystem>
 #include <string>
 
@@ -47,7 +51,7 @@ TEST(AtomicFile, HeldCommitsAppearTogetherOrNotAtAll) {
     a.commit();
     b.write("b");
     b.commit();
-    EXPECT_EQ(entries(), 0u);  // complete, but not there yet
+    EXPECT_EQ(entries(), 0u);            // complete, but not there yet
     EXPECT_THROW(HeldCommits(), Error);  // one at a time
     held.release();
     EXPECT_EQ(test::file_bytes(dir / "a.txt"), "a");
@@ -64,6 +68,30 @@ TEST(AtomicFile, HeldCommitsAppearTogetherOrNotAtAll) {
   d.write("d");
   d.commit();
   EXPECT_EQ(test::file_bytes(dir / "d.txt"), "d");
+}
+
+// A signal in the moment a set of held outputs is renamed into place waits for the last rename: a SIGINT
+// between the mesh's rename and its report's left the mesh without the report (and one between naming a
+// temporary and registering it left the temporary). Here the signal comes from inside the scope, where the
+// renames would be; the process finishes the scope, then dies of it.
+TEST(AtomicFile, ASignalWaitsForTheRenamesInPlace) {
+  test::TempDir dir;
+  const std::string marker = dir / "after.txt";
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    with_signals_deferred([&] {
+      ::raise(SIGTERM);
+      AtomicFile file(marker);  // still running: the signal waits
+      file.write("x");
+      file.commit();
+    });
+    _exit(0);  // not reached: the call's end raised the signal again
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << status;
+  EXPECT_EQ(test::file_bytes(marker), "x");
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -78,6 +79,13 @@ class HeldCommits {
  private:
   std::vector<FinishedFile> files_;
 };
+
+// Runs `work` with SIGINT, SIGTERM and SIGHUP held back (on any thread): the handler notes the signal, and
+// the end of the outermost such call raises it again, which then deletes what temporaries are left and ends
+// the process. Around renames into place, so that a set of outputs is either all there or none (a signal
+// between a mesh's rename and its report's left the mesh alone), and no temporary is named without being
+// registered for the handler.
+void with_signals_deferred(const std::function<void()>& work);
 
 // Throws the error that writing `path` would meet, before any work: creates and deletes a temporary beside
 // it, or, for a path written directly (see AtomicFile), checks it is writable without opening it (opening a
