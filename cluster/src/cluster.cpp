@@ -33,6 +33,20 @@ const char* representative_name(Representative representative) {
   return "unknown";
 }
 
+std::uint64_t planned_fine_cells(const ClusterOptions& options) {
+  if (!options.octree && options.target_faces == 0) return 0;
+  const double vertices = options.octree && options.target_vertices > 0
+                              ? static_cast<double>(options.target_vertices)
+                              : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
+  // A uniform grid's face target picks among the coarser grids that groups of fine cells make, so a small
+  // target needs more fine cells than its vertices would ask for to have resolutions to choose from: at 64
+  // cells, bunny --faces 10 had 4 fine cells along its box and every choice gave 0 faces or over 10. The
+  // octree merges one cell at a time and reaches any count from its target's own cells.
+  const double least = options.octree ? 64.0 : 4096.0;
+  return static_cast<std::uint64_t>(
+      std::min(std::max(least, options.fine_cells_per_target * vertices), 1.8e19));
+}
+
 namespace cluster_detail {
 namespace {
 
@@ -388,12 +402,7 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
     const double vertices = options.octree && options.target_vertices > 0
                                 ? static_cast<double>(options.target_vertices)
                                 : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
-    // A uniform grid's face target picks among the coarser grids that groups of fine cells make, so a
-    // small target needs more fine cells than its vertices would ask for to have resolutions to choose
-    // from: at 64 cells, bunny --faces 10 had 4 fine cells along its box and every choice gave 0 faces or
-    // over 10. The octree merges one cell at a time and reaches any count from its target's own cells.
-    const double least = options.octree ? 64.0 : 4096.0;
-    const double fine = std::max(least, options.fine_cells_per_target * vertices);
+    const double fine = static_cast<double>(planned_fine_cells(options));
     pass.target_cells = static_cast<std::uint64_t>(std::min(fine, 2e9));
     // A face target asks for as many fine cells as faces: a thin strip whose cross-section fit in one cell
     // had more cells than the target's vertices, yet every triangle collapsed within them, and the output

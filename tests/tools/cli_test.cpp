@@ -1533,6 +1533,31 @@ TEST(Cli, EveryCommandSaysWhereCornersDisagreed) {
   }
 }
 
+// A face or vertex target's soup pass holds several times the indexed pass's bytes per fine cell, so a
+// target-driven run stays in core where its vertex array is smaller than that difference (a 20 M scan to
+// 400 k faces under 64M peaked at 1.7 GiB out of core, 350 MiB in core); a small octree still goes out of
+// core under a small limit, and a grid's run as before.
+TEST(Cli, ClusterStaysInCoreWhereTheSoupPassWouldTakeMore) {
+  test::TempDir dir;
+  const std::string mesh = dir / "scan.ply", out = dir / "out.ply", report = dir / "report.json";
+  ASSERT_EQ(run("gen -q --triangles 100000 --seed 3 -o " + mesh, dir).exit_code, 0);  // 600 kB of vertices
+  const struct {
+    const char* target;
+    bool out_of_core;
+  } cases[] = {{"--faces 20000", false},
+               {"--octree --vertices 10000", false},
+               {"--octree --vertices 20", true},
+               {"--grid 32", true}};
+  for (const auto& c : cases) {
+    const CommandResult r =
+        run("cluster -q " + mesh + " -o " + out + " " + c.target + " --memory-limit 100K --report " + report,
+            dir);
+    ASSERT_EQ(r.exit_code, 0) << c.target << "\n" << r.err;
+    EXPECT_EQ(nlohmann::json::parse(file_bytes(report))["out_of_core"].get<bool>(), c.out_of_core)
+        << c.target;
+  }
+}
+
 // cluster holds its input's vertex array only up to --memory-limit (a third of RAM by default); past it the
 // faces are dereferenced on disk and clustered as soups, to the same cells: same counts, the colors kept,
 // and distances to the original within a hair of the in-core run's.

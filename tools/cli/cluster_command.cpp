@@ -60,10 +60,12 @@ void add_cluster_command(CLI::App& app) {
                   "Weight of a border crossing against a cell's worth of surface")
       ->capture_default_str()
       ->check(non_negative_number());
-  cmd->add_option("--memory-limit", flags->memory_limit,
-                  "Bytes the input's vertex array may take, e.g. 2G (default: a third of RAM, or half of "
-                  "`ulimit -v` where less); a larger one "
-                  "is dereferenced on disk under TMPDIR and its faces clustered as triangle soups")
+  cmd->add_option(
+         "--memory-limit", flags->memory_limit,
+         "Bytes the input's vertex array may take, e.g. 2G (default: a third of RAM, or half of "
+         "`ulimit -v` where less); a larger one "
+         "is dereferenced on disk under TMPDIR and its faces clustered as triangle soups (with a face "
+         "or vertex target, only where that takes less memory than staying in core)")
       ->check(byte_size());
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); the output does not depend on it")
@@ -95,8 +97,9 @@ void add_cluster_command(CLI::App& app) {
     ReadOptions read;
     read.progress = progress;
     read.warn = console.warn;
-    read.memory_budget =
-        effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit));
+    read.memory_budget = cluster_vertex_allowance(
+        options,
+        effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit)));
     std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);
     const bool out_of_core = dereferenced_out_of_core(*stream);
     // Out of core the clustering sees corners, not the file's vertex array: the count comes from the stream.

@@ -126,6 +126,17 @@ std::uint64_t vertex_allowance(const std::string& input_path, const SimplifyOpti
   return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(allowance));
 }
 
+}  // namespace
+
+std::uint64_t cluster_vertex_allowance(const ClusterOptions& options, std::uint64_t budget) {
+  const auto cells = static_cast<double>(planned_fine_cells(options));
+  const double indexed = kLevelMargin * pass_bytes_per_cell(false, false, false) * cells;
+  const double allowance = std::max(static_cast<double>(budget), kSoupClusterBytesPerCell * cells - indexed);
+  return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::min(allowance, 1.8e19)));
+}
+
+namespace {
+
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }

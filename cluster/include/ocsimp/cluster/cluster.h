@@ -161,6 +161,10 @@ struct ClusterStats {
   std::uint64_t peak_rss_bytes = 0;  // of the process, when cluster() returned
 };
 
+// The fine cells a target-driven run (a face target, or the octree) plans its single pass for; 0 for a grid
+// given by --grid or --cell-size, whose cells only the pass finds.
+std::uint64_t planned_fine_cells(const ClusterOptions& options);
+
 // Clusters the stream in one pass and returns the mesh with one quadric per vertex (the sum of the plane
 // quadrics of the original triangles that touched the cell). Consumes the stream; an indexed stream's vertex
 // array is emptied (see the top of this file). Throws Error on bad input (non-finite
