@@ -234,9 +234,9 @@ struct CellStore {
   // carries the mark in the sign of its zero constant term instead of a byte of its own.
   void touch(std::uint32_t i) {
     Quadric& q = quadrics[i];
-    if (!(q.a00 + q.a11 + q.a22 > 0.0)) q.c = -0.0;
+    if (!(q.trace() > 0.0)) q.c = -0.0;
   }
-  static bool touched(const Quadric& q) { return q.a00 + q.a11 + q.a22 > 0.0 || std::signbit(q.c); }
+  static bool touched(const Quadric& q) { return q.trace() > 0.0 || std::signbit(q.c); }
 
   // Adds a chunk's partial sums to cell i (but for the exact border sums of an indexed pass).
   void add(std::uint32_t i, const CellRecord& part) {

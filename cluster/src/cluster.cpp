@@ -132,7 +132,7 @@ void store_attributes(const FineCells& cells, const Attributes& a, double points
 double carried_border_scale(const FineCells& cells, const ClusterOptions& options) {
   // Each triangle adds its area-weighted plane to the cells of its three corners: the traces sum 3x the area.
   double trace = 0;
-  for (const Quadric& q : cells.quadrics) trace += q.a00 + q.a11 + q.a22;
+  for (const Quadric& q : cells.quadrics) trace += q.trace();
   const double triangles = static_cast<double>(std::max<std::uint64_t>(cells.input_triangles, 1));
   const double h = equilateral_edge(trace / 3.0 / triangles);
   const double scale = options.carried_border_weight * h / (4.0 * cells.grid.cell);
@@ -273,7 +273,6 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
   const double carried_weight = options.border_in_quadrics ? carried_border_scale(cells, options) : 0.0;
   // With the border planes in the quadrics, each vertex says how much of its quadric is surface.
   if (options.border_in_quadrics) out.areas.resize(clusters);
-  auto trace = [](const Quadric& q) { return q.a00 + q.a11 + q.a22; };
   if (!clustering) {
     // Every fine cell is an output vertex.
     tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
@@ -285,7 +284,7 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
       write_attributes(cells, i, a);
       store_attributes(cells, a, sums.points, i, mesh);
       if (options.border_in_quadrics) {
-        out.areas[i] = trace(cells.quadrics[i]);
+        out.areas[i] = cells.quadrics[i].trace();
         cells.quadrics[i] += carried;
       }
     });
@@ -317,8 +316,10 @@ QuadricMesh assemble(FineCells& cells, const Clustering* clustering, const Clust
         Quadric carried;
         sums.add(cell_placement_sums(cells, i, options.boundary_weight, carried_weight, &carried));
         surface += cells.quadrics[i];
-        area += trace(cells.quadrics[i]);
-        if (options.border_in_quadrics) surface += carried;
+        if (options.border_in_quadrics) {
+          area += cells.quadrics[i].trace();
+          surface += carried;
+        }
         write_attributes(cells, i, a);
       }
       mesh.positions[c] = nearest_float(place(sums, options.representative).point);

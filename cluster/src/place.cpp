@@ -147,7 +147,7 @@ PlacementSums cell_placement_sums(const FineCells& cells, std::size_t cell, doub
   }
   s.points = cells.points[cell];
   const Quadric& surface = cells.quadrics[cell];
-  s.corner_area = surface.a00 + surface.a11 + surface.a22;
+  s.corner_area = surface.trace();
   // Soups count corners as points; an indexed input counts vertices, each the corner of about six triangles.
   s.corners = cells.input_vertices > 0 ? kCornersPerVertex * s.points : s.points;
   s.point_sum =

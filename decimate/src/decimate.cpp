@@ -981,10 +981,7 @@ struct Decimator {
     } else {
       face_quadrics(positions);
       parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t v = begin; v < end; ++v) {
-          const Quadric& q = verts[v].q;
-          verts[v].area = static_cast<float>(q.a00 + q.a11 + q.a22);
-        }
+        for (std::size_t v = begin; v < end; ++v) verts[v].area = static_cast<float>(verts[v].q.trace());
       });
     }
     std::sort(boundary_list.begin(), boundary_list.end());

@@ -69,9 +69,7 @@ struct QuadricMesh {
 
 // The area vertex v's quadric stands for (see QuadricMesh::areas).
 inline double surface_area(const QuadricMesh& m, std::size_t v) {
-  if (!m.areas.empty()) return m.areas[v];
-  const Quadric& q = m.quadrics[v];
-  return q.a00 + q.a11 + q.a22;
+  return m.areas.empty() ? m.quadrics[v].trace() : m.areas[v];
 }
 
 // Throws Error, its reason starting with `who` (as "decimate: "), unless every attribute array is empty or

@@ -42,6 +42,8 @@ struct Quadric {
   double evaluate(const Vec3d& p) const;
 
   Eigen::Matrix3d a() const;
+  // The weight of its planes: each plane adds its weight to A's diagonal (its normal being a unit vector).
+  double trace() const { return a00 + a11 + a22; }
   Vec3d b() const { return {b0, b1, b2}; }
 
   bool operator==(const Quadric&) const = default;
