@@ -400,16 +400,13 @@ QuadricMesh run(TriangleStream& stream, const ClusterOptions& options, unsigned 
   pass.accept_fine_cells = options.accept_fine_cells;
   const bool targeted = options.octree || options.target_faces > 0;
   if (targeted) {
-    const double vertices = options.octree && options.target_vertices > 0
-                                ? static_cast<double>(options.target_vertices)
-                                : std::max(1.0, static_cast<double>(options.target_faces) / 2.0);
     const double fine = static_cast<double>(planned_fine_cells(options));
     pass.target_cells = static_cast<std::uint64_t>(std::min(fine, 2e9));
     // A face target asks for as many fine cells as faces: a thin strip whose cross-section fit in one cell
     // had more cells than the target's vertices, yet every triangle collapsed within them, and the output
     // had no face at all.
     const bool by_faces = !(options.octree && options.target_vertices > 0);
-    const double wanted = by_faces ? static_cast<double>(options.target_faces) : vertices;
+    const double wanted = static_cast<double>(by_faces ? options.target_faces : options.target_vertices);
     const double needed =
         options.refine_until_cells > 0 ? static_cast<double>(options.refine_until_cells) : wanted;
     pass.needed_cells = static_cast<std::uint64_t>(std::min({needed, wanted, fine, 2e9}));
