@@ -856,11 +856,6 @@ struct Decimator {
       for (const auto& [id, f] : chunk_folds[c]) fold_list.emplace_back(id + base, f);
     }
     boundary_edges = boundary_list.size();
-    // Faces all of whose edges are border edges: they share no edge with another face.
-    if (boundary_list.size() >= 3) {
-      std::vector<std::uint8_t> open_sides(faces.size(), 0);
-      for (const auto& [e, f] : boundary_list) stats.separate_faces += ++open_sides[f] == 3;
-    }
   }
 
   // Two faces turned back on each other by more than 120 degrees, judged by their encoded input normals
@@ -992,12 +987,14 @@ struct Decimator {
       }
     }
     const std::vector<std::uint8_t> crack = cracks_paired();
-    if (!crack.empty()) {
-      // A face whose sides are all cracks joins its neighbours: not a separate face (separate_faces_note).
+    // Faces all of whose edges are border edges: they share no edge with another face. A side that pairs
+    // will close (a crack) does not count: such a face joins its neighbours (separate_faces_note).
+    if (boundary_list.size() >= 3) {
       std::vector<std::uint8_t> open_sides(faces.size(), 0);
-      stats.separate_faces = 0;
-      for (std::size_t i = 0; i < boundary_list.size(); ++i)
-        stats.separate_faces += !crack[i] && ++open_sides[boundary_list[i].second] == 3;
+      for (std::size_t i = 0; i < boundary_list.size(); ++i) {
+        const bool closes = i < crack.size() && crack[i];
+        stats.separate_faces += !closes && ++open_sides[boundary_list[i].second] == 3;
+      }
     }
     // A fold is a border of each of its two sheets: plane quadrics cannot see a flap move along the surface
     // it lies on (its planes are nearly parallel), so both get the border's perpendicular planes.
