@@ -26,7 +26,7 @@ std::atomic<bool> g_used[kMaxLive];
 std::mutex g_live_mutex;
 std::once_flag g_handlers_installed;
 
-// SignalsDeferred scopes alive, and the signal one of them holds back (0: none).
+// with_signals_deferred calls under way, and the signal they hold back (0: none).
 std::atomic<int> g_deferring{0};
 std::atomic<int> g_deferred_signal{0};
 

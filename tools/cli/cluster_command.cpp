@@ -136,9 +136,9 @@ void add_cluster_command(CLI::App& app) {
                           {"vertices", stats.output_vertices},
                           {"faces", stats.output_faces},
                           {"isolated_vertices", kept ? stats.isolated_vertices : 0}};
-      // The grid and cell size asked for, null where not (the cells used are under "cells").
-      const bool by_grid = !options.octree && options.target_faces == 0 && !(options.cell_size > 0);
-      const bool by_size = !options.octree && options.target_faces == 0 && options.cell_size > 0;
+      // The grid and cell size asked for, null where a target chose the cells (those used are under "cells").
+      const bool given = planned_fine_cells(options) == 0;
+      const bool by_size = given && options.cell_size > 0, by_grid = given && !by_size;
       report["options"] = {
           {"mode", options.octree ? "octree" : "grid"},
           {"grid", by_grid ? nlohmann::json(options.grid) : nlohmann::json(nullptr)},
