@@ -2,7 +2,8 @@
 // meshoptimizer's meshopt_simplifySloppy (also a grid clustering) at equal face count, the quadric against
 // the mean representative and the constrained one on the same grid, and the adaptive octree against the
 // uniform grid at equal vertex count. Distances are two-sided (tools/compare.h: area-uniform samples both
-// ways plus vertices, exact closest points), as % of the original's bounding-box diagonal.
+// ways plus vertices, exact closest points, the Hausdorff distance refined from them), as % of the original's
+// bounding-box diagonal.
 //
 //   cluster_quality [--ratios 0.1,0.02,0.005] [--samples N] [--runs N] [--threads N]
 //                   [--fine CELLS_PER_TARGET] [--generate NAME=TRIANGLES] NAME=MESH_FILE...

@@ -1,7 +1,8 @@
 // ocsimp's QEM decimator against meshoptimizer's meshopt_simplify, in one process: same meshes, same face
 // counts, time of the simplification call alone (runs alternate between the two; medians of the times and of
 // the run-by-run ratios), and the two-sided distance of each result
-// to the original (tools/compare.h: area-uniform samples both ways plus vertices, exact closest points).
+// to the original (tools/compare.h: area-uniform samples both ways plus vertices, exact closest points, the
+// Hausdorff distance refined from them).
 //
 //   decimate_vs_meshopt [--runs N] [--ratios 0.1,0.01] [--samples N] [--threads N] NAME=MESH_FILE...
 //

@@ -8,7 +8,7 @@
 # 3. Runs both simplifiers in one process on bunny, horse and igea (../shared/data) and the generated meshes,
 #    to 10 % and 1 % of the faces (or RATIOS): time of the call (RUNS runs alternating between the two,
 #    medians of the times and of the run-by-run ratios; one run for 10 M), two-sided RMS and Hausdorff
-#    distance to the original (SAMPLES area samples each way, plus vertices).
+#    distance to the original (SAMPLES area samples each way, plus vertices; the Hausdorff distance refined).
 # 4. Runs `ocsimp decimate` on the 10 M mesh and prints its peak RSS per input triangle (the issue's limit is 150).
 # 5. Deletes the generated meshes.
 #

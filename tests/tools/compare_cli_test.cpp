@@ -45,6 +45,8 @@ TEST(CompareCli, JsonCarriesTheLibraryNumbersForAnyThreadCount) {
   EXPECT_EQ(j["forward"]["hausdorff"].get<double>(), d.forward.hausdorff);
   EXPECT_EQ(j["forward"]["rms"].get<double>(), d.forward.rms);
   EXPECT_EQ(j["backward"]["mean"].get<double>(), d.backward.mean);
+  EXPECT_EQ(j["backward"]["hausdorff_bound"].get<double>(), d.backward.hausdorff_bound);
+  EXPECT_GE(d.backward.hausdorff_bound, d.backward.hausdorff);
   EXPECT_EQ(j["backward"]["samples"].get<std::size_t>(), 30000u);
   EXPECT_EQ(j["forward"]["vertex_samples"].get<std::size_t>(), original.vertex_count());
   EXPECT_DOUBLE_EQ(j["rms_percent"].get<double>(), 100 * d.rms / d.diagonal);

@@ -41,10 +41,25 @@ struct ChunkStats {
   }
 };
 
+// A vertex's distance to the other surface, rounded up to a float (it bounds, see refine_maximum), and the
+// triangle where it is reached: 8 bytes a vertex, kept for a whole mesh.
+struct NearestTriangle {
+  float distance = 0;
+  Index triangle = 0;
+
+  static NearestTriangle of(const ClosestPoint& closest) {
+    const double d = std::sqrt(closest.distance_squared);
+    float f = static_cast<float>(d);
+    if (double(f) < d) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+    return {f, closest.triangle};
+  }
+};
+
 // Distances from `points` (moved by `shift` into `to`'s frame) to `to`, each search bounded by the distance
 // to the previous point's closest point, which lies on the surface: neighbouring samples are close, so this
-// prunes most of the BVH at once.
-ChunkStats measure_points(const DistanceIndex& to, Vec3d* points, std::size_t count, const Vec3d& shift) {
+// prunes most of the BVH at once. When `nearest` is given, each point's nearest triangle goes there too.
+ChunkStats measure_points(const DistanceIndex& to, Vec3d* points, std::size_t count, const Vec3d& shift,
+                          NearestTriangle* nearest = nullptr) {
   if (shift != Vec3d::Zero()) {
     for (std::size_t i = 0; i < count; ++i) points[i] += shift;
   }
@@ -62,12 +77,306 @@ ChunkStats measure_points(const DistanceIndex& to, Vec3d* points, std::size_t co
     if (!(closest.distance_squared < std::numeric_limits<double>::infinity()))
       closest = to.closest_point(p);  // only if rounding defeated the widening above
     stats.add(std::sqrt(closest.distance_squared), p);
+    if (nearest) nearest[i] = NearestTriangle::of(closest);
     previous = closest.point;
     have_previous = true;
   }
   return stats;
 }
 
+// --- The Hausdorff distance refined to the true maximum ---
+//
+// Samples only ever find a lower bound of max d(p) over a surface, and its largest gaps are often inside
+// large triangles, away from their vertices (a coarse face bridging a groove): a million samples on the
+// 2,000 faces of a simplified horse still fall 0.3 % short, more than the gap between two methods. So the
+// maximum is refined by branch and bound over the triangles of `from`:
+//  - The distance to one triangle t of `to` is a convex function of p, so over a triangle T of `from` it
+//    peaks at a corner of T, and d(p) <= dist(p, t) for every p. Hence, for any t, the largest distance of
+//    T's corners to t bounds d over all of T. T's bound takes the best of the triangles nearest its corners:
+//    exact where one triangle is nearest all over T, loose only where T straddles a ridge of d (the medial
+//    axis between two sheets of `to`, where the largest gaps are).
+//  - Triangles whose bound lies within the tolerance of the largest distance found are done. The rest split
+//    in four at their edge midpoints, whose distances raise the largest distance found, and whose children
+//    get bounds of their own; the bounds shrink with the children's size.
+// Before any query, a cheaper bound screens the triangles: d is 1-Lipschitz, so d over T is at most a
+// corner's distance plus the corner's farthest reach within T.
+
+// Relative tolerance of the refined maximum: the true one lies within it above the reported one.
+constexpr double kRefineTolerance = 1e-4;
+
+struct RefineNode {
+  std::array<Vec3d, 3> corner;     // in `to`'s frame
+  std::array<Index, 3> nearest;    // `to`'s triangle closest to each corner
+  std::array<double, 3> distance;  // to `to`, of each corner
+  // `to`'s triangle nearest a point inside the node (its root's centroid), once probed; for nodes whose
+  // corners lie on `to` (a surface measured against a part of itself). There the corners' nearest triangles
+  // are ties, won by any triangle of their fans, which would leave a bound of the node's size at every depth.
+  Index inside = kNone;
+  bool probe = false;  // to be probed before it is split
+  double bound = 0;    // of d over the node's triangle
+
+  static constexpr Index kNone = std::numeric_limits<Index>::max();
+
+  double reached() const { return std::max({distance[0], distance[1], distance[2]}); }
+};
+
+// The bound on d over the node's triangle (see above), from the triangles nearest its corners.
+double node_bound(const DistanceIndex::Impl& to, const RefineNode& node) {
+  double best = std::numeric_limits<double>::infinity();
+  const std::array<Index, 4> candidates = {node.nearest[0], node.nearest[1], node.nearest[2], node.inside};
+  for (int i = 0; i < 4; ++i) {
+    const Index t = candidates[i];
+    if (t == RefineNode::kNone ||
+        std::find(candidates.begin(), candidates.begin() + i, t) != candidates.begin() + i)
+      continue;
+    const Index* c = to.corners + 3 * std::size_t{t};
+    const Vec3d a = to.vertex(c[0]), b = to.vertex(c[1]), e = to.vertex(c[2]);
+    double farthest = 0;
+    for (const Vec3d& p : node.corner)
+      farthest = std::max(farthest, (closest_point_on_triangle(p, a, b, e) - p).squaredNorm());
+    best = std::min(best, farthest);
+  }
+  return std::sqrt(best);
+}
+
+struct RefinedMaximum {
+  double hausdorff = 0;
+  Vec3d farthest = Vec3d::Zero();  // in `to`'s frame
+  double bound = 0;                // the true maximum is at most this
+  bool settled = false;            // within the tolerance of `hausdorff`
+};
+
+// Refines the sampled maximum `sampled` (reached at `sampled_at`) of d over `from`, whose vertices' closest
+// points on `to` are `vertex_nearest` (indexed by vertex; only referenced ones are used). At most `budget`
+// closest-point queries; should they run out, `bound` says how far the answer may still be short.
+RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceIndex& to, const Vec3d& shift,
+                              const std::vector<NearestTriangle>& vertex_nearest, double sampled,
+                              const Vec3d& sampled_at, std::size_t budget, const ProgressFn& progress,
+                              const std::string& phase) {
+  const DistanceIndex::Impl& target = to.impl();
+  RefinedMaximum result{sampled, sampled_at, sampled};
+  // The absolute floor keeps rounding (and a surface measured against itself, where the maximum is 0) from
+  // splitting without end.
+  const double floor = 1e-9 * from.bounds.diagonal() + 1e-12 * from.coordinate_scale;
+  auto threshold = [&] { return result.hausdorff + std::max(kRefineTolerance * result.hausdorff, floor); };
+
+  // Screening, in fixed chunks merged in order (the same candidates for any thread count), keeps what the
+  // triangles' corners cannot settle: 12 bytes each, so that a surface measured against itself, where every
+  // triangle is one, needs no more than that.
+  struct Candidate {
+    float reached;  // the largest corner distance (rounded up, as the distances are)
+    float bound;    // the root's bound, rounded up
+    Index triangle;
+  };
+  auto round_up = [](double x) {
+    float f = static_cast<float>(x);
+    return double(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+  };
+  constexpr std::size_t chunk_triangles = 4096;
+  const std::size_t chunks = (from.triangle_count + chunk_triangles - 1) / chunk_triangles;
+  std::vector<std::vector<Candidate>> found(chunks);
+  const double first_threshold = threshold();
+  auto corners_of = [&](std::size_t f) {
+    const Index* c = from.corners + 3 * f;
+    return std::array<Vec3d, 3>{from.vertex(c[0]) + shift, from.vertex(c[1]) + shift,
+                                from.vertex(c[2]) + shift};
+  };
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, chunks, 1),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t chunk = range.begin(); chunk < range.end(); ++chunk) {
+          const std::size_t last = std::min(from.triangle_count, (chunk + 1) * chunk_triangles);
+          for (std::size_t f = chunk * chunk_triangles; f < last; ++f) {
+            const Index* c = from.corners + 3 * f;
+            const double d0 = vertex_nearest[c[0]].distance, d1 = vertex_nearest[c[1]].distance,
+                         d2 = vertex_nearest[c[2]].distance;
+            const std::array<Vec3d, 3> p = corners_of(f);
+            const double e01 = (p[1] - p[0]).squaredNorm(), e12 = (p[2] - p[1]).squaredNorm(),
+                         e20 = (p[0] - p[2]).squaredNorm();
+            // A corner's farthest reach within the triangle is its longer edge; first a coarser test with one
+            // square root, which settles nearly every triangle of a fine surface.
+            const double reached = std::max({d0, d1, d2});
+            if (!(reached + std::sqrt(std::max({e01, e12, e20})) > first_threshold)) continue;
+            const double reach =
+                std::min({d0 + std::sqrt(std::max(e01, e20)), d1 + std::sqrt(std::max(e01, e12)),
+                          d2 + std::sqrt(std::max(e12, e20))});
+            if (!(reach > first_threshold)) continue;
+            RefineNode node;
+            node.corner = p;
+            for (int k = 0; k < 3; ++k) node.nearest[k] = vertex_nearest[c[k]].triangle;
+            const double bound = node_bound(target, node);
+            if (bound > first_threshold)
+              found[chunk].push_back({round_up(reached), round_up(bound), static_cast<Index>(f)});
+          }
+        }
+      },
+      tbb::simple_partitioner());
+  std::vector<Candidate> candidates;
+  for (auto& chunk : found) candidates.insert(candidates.end(), chunk.begin(), chunk.end());
+  found = {};
+  // Each root takes a query before it can settle, so the budget cannot reach beyond its count of roots
+  // (a surface against a copy of itself puts every triangle here). Those with the largest corner distances
+  // stay; the rest keep their screening bound, and the answer says so.
+  double unsettled = 0;
+  if (candidates.size() > budget) {
+    std::nth_element(candidates.begin(), candidates.begin() + budget, candidates.end(),
+                     [](const Candidate& a, const Candidate& b) {
+                       return a.reached > b.reached || (a.reached == b.reached && a.triangle < b.triangle);
+                     });
+    for (std::size_t i = budget; i < candidates.size(); ++i)
+      unsettled = std::max(unsettled, double(candidates[i].bound));
+    candidates.resize(budget);
+    std::sort(candidates.begin(), candidates.end(),
+              [](const Candidate& a, const Candidate& b) { return a.triangle < b.triangle; });
+  }
+  std::vector<RefineNode> nodes(candidates.size());
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, candidates.size(), chunk_triangles),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i < range.end(); ++i) {
+          RefineNode& node = nodes[i];
+          const Index* c = from.corners + 3 * std::size_t{candidates[i].triangle};
+          node.corner = corners_of(candidates[i].triangle);
+          for (int k = 0; k < 3; ++k) {
+            node.nearest[k] = vertex_nearest[c[k]].triangle;
+            node.distance[k] = vertex_nearest[c[k]].distance;
+          }
+          // Corners on `to` (a surface measured against a part of itself) get an inside probe.
+          node.probe = candidates[i].reached <= floor;
+          node.bound = node_bound(target, node);
+        }
+      },
+      tbb::simple_partitioner());
+  candidates = {};
+  // Nodes are split in batches, in parallel. The batches alternate between two orders: the largest corner
+  // distance first (a search: it climbs to the maximum near the largest distances found) and the largest
+  // bound first (a proof: it shrinks the bound wherever it is loosest, and finds maxima the search did not
+  // climb to). Each order is a max-heap of indices into `nodes`, ties broken by the index, so the batches,
+  // and the answer, are the same for any thread count; a node split from one heap is skipped in the other.
+  std::vector<char> split(nodes.size(), 0);
+  using Order = std::size_t;
+  auto by_reach = [&](Order a, Order b) {
+    const double ra = nodes[a].reached(), rb = nodes[b].reached();
+    return ra < rb || (ra == rb && a > b);
+  };
+  auto by_bound = [&](Order a, Order b) {
+    return nodes[a].bound < nodes[b].bound || (nodes[a].bound == nodes[b].bound && a > b);
+  };
+  std::vector<Order> reach_heap(nodes.size()), bound_heap(nodes.size());
+  for (Order i = 0; i < nodes.size(); ++i) reach_heap[i] = bound_heap[i] = i;
+  std::make_heap(reach_heap.begin(), reach_heap.end(), by_reach);
+  std::make_heap(bound_heap.begin(), bound_heap.end(), by_bound);
+
+  constexpr std::size_t batch_nodes = 1024, chunk_nodes = 64;
+  std::size_t queries = 0;
+  std::vector<Order> batch;
+  std::vector<RefineNode> children;
+  std::vector<ClosestPoint> midpoints;
+  for (std::size_t round = 0; queries + 3 <= budget; ++round) {
+    batch.clear();
+    const std::size_t affordable = std::min(batch_nodes, (budget - queries) / 3);
+    const double keep = threshold();
+    // The proof's heap ends the refinement: once its top is within the tolerance, so is every node.
+    while (!bound_heap.empty() && (split[bound_heap.front()] || !(nodes[bound_heap.front()].bound > keep))) {
+      std::pop_heap(bound_heap.begin(), bound_heap.end(), by_bound);
+      bound_heap.pop_back();
+    }
+    if (bound_heap.empty()) break;
+    auto take = [&](std::vector<Order>& heap, const auto& order) {
+      while (batch.size() < affordable && !heap.empty()) {
+        std::pop_heap(heap.begin(), heap.end(), order);
+        const Order n = heap.back();
+        heap.pop_back();
+        if (split[n] || !(nodes[n].bound > keep)) continue;
+        split[n] = 1;
+        batch.push_back(n);
+      }
+    };
+    if (round % 2 == 0)
+      take(reach_heap, by_reach);
+    else
+      take(bound_heap, by_bound);
+    if (batch.empty()) continue;
+    children.resize(4 * batch.size());
+    midpoints.resize(3 * batch.size());
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, batch.size(), chunk_nodes),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          for (std::size_t b = range.begin(); b < range.end(); ++b) {
+            const RefineNode& node = nodes[batch[b]];
+            // d is 1-Lipschitz: a corner's distance plus the way from it bounds a point's distance, which
+            // prunes the search as the previous sample's does in measure_points (widened alike for rounding).
+            auto measure = [&](const Vec3d& p, ClosestPoint& m) {
+              double bound = std::numeric_limits<double>::infinity();
+              for (int k = 0; k < 3; ++k)
+                bound = std::min(bound, node.distance[k] + (p - node.corner[k]).norm());
+              m = to.closest_point(p, bound * (1 + 1e-9) + 1e-12 * p.cwiseAbs().maxCoeff());
+              if (!(m.distance_squared < std::numeric_limits<double>::infinity())) m = to.closest_point(p);
+              m.point = p;  // kept for the farthest point below
+            };
+            if (node.probe) {
+              // A root is probed at its centroid first, and comes back with its new bound.
+              RefineNode& probed = children[4 * b];
+              probed = node;
+              measure((node.corner[0] + node.corner[1] + node.corner[2]) / 3.0, midpoints[3 * b]);
+              probed.inside = midpoints[3 * b].triangle;
+              probed.probe = false;
+              probed.bound = node_bound(target, probed);
+              for (int k = 1; k < 3; ++k) midpoints[3 * b + k].distance_squared = -1;  // no query
+              for (int k = 1; k < 4; ++k) children[4 * b + k].bound = 0;               // no node
+              continue;
+            }
+            RefineNode mid;
+            mid.inside = node.inside;
+            for (int k = 0; k < 3; ++k) {
+              ClosestPoint& m = midpoints[3 * b + k];
+              measure(0.5 * (node.corner[k] + node.corner[(k + 1) % 3]), m);
+              mid.corner[k] = m.point;
+              mid.nearest[k] = m.triangle;
+              mid.distance[k] = std::sqrt(m.distance_squared);
+            }
+            // Corner k's child (corner k, then the midpoints of the edges leaving and entering it), then the
+            // middle one.
+            for (int k = 0; k < 3; ++k) {
+              RefineNode& child = children[4 * b + k];
+              const int in = (k + 2) % 3;
+              child.corner = {node.corner[k], mid.corner[k], mid.corner[in]};
+              child.nearest = {node.nearest[k], mid.nearest[k], mid.nearest[in]};
+              child.distance = {node.distance[k], mid.distance[k], mid.distance[in]};
+              child.inside = node.inside;
+              child.probe = false;
+            }
+            children[4 * b + 3] = mid;
+            for (int k = 0; k < 4; ++k) children[4 * b + k].bound = node_bound(target, children[4 * b + k]);
+          }
+        },
+        tbb::simple_partitioner());
+    for (const ClosestPoint& m : midpoints) {
+      if (m.distance_squared < 0) continue;
+      ++queries;
+      const double d = std::sqrt(m.distance_squared);
+      if (d > result.hausdorff) result.hausdorff = d, result.farthest = m.point;
+    }
+    const double kept = threshold();
+    for (const RefineNode& child : children) {
+      if (!(child.bound > kept)) continue;
+      const Order n = nodes.size();
+      nodes.push_back(child);
+      split.push_back(0);
+      reach_heap.push_back(n);
+      std::push_heap(reach_heap.begin(), reach_heap.end(), by_reach);
+      bound_heap.push_back(n);
+      std::push_heap(bound_heap.begin(), bound_heap.end(), by_bound);
+    }
+    report(progress, phase, queries, budget);
+  }
+  report(progress, phase, budget, budget);
+  result.bound = std::max(threshold(), unsettled);
+  for (Order n : bound_heap)
+    if (!split[n]) result.bound = std::max(result.bound, nodes[n].bound);
+  result.settled = !(result.bound > threshold());
+  return result;
+}
 }  // namespace
 
 OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceIndex& to,
@@ -87,6 +396,8 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
   const std::size_t vertex_chunks = (vertex_count + chunk_samples - 1) / chunk_samples;
   const std::size_t chunks = area_chunks + vertex_chunks;
   std::vector<ChunkStats> stats(chunks);
+  // The vertices' nearest triangles seed the refinement of the maximum, which needs them all.
+  std::vector<NearestTriangle> vertex_nearest(vertex_count > 0 ? source.vertex_count : 0);
   const std::uint64_t total = area_count + vertex_count;
   std::uint64_t done = 0;
   report(options.progress, phase, 0, total);
@@ -98,6 +409,7 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
           std::array<Vec3d, chunk_samples> points;
           for (std::size_t chunk = range.begin(); chunk < range.end(); ++chunk) {
             std::size_t n = 0;
+            std::array<NearestTriangle, chunk_samples> nearest;
             if (chunk < area_chunks) {
               const std::size_t first = chunk * chunk_samples;
               const std::size_t last = std::min(area_count, first + chunk_samples);
@@ -109,6 +421,10 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
               for (std::size_t i = first; i < last; ++i)
                 points[i - first] = source.vertex(source.referenced_vertices[i]);
               n = last - first;
+              stats[chunk] = measure_points(to, points.data(), n, shift, nearest.data());
+              for (std::size_t i = first; i < last; ++i)
+                vertex_nearest[source.referenced_vertices[i]] = nearest[i - first];
+              continue;
             }
             stats[chunk] = measure_points(to, points.data(), n, shift);
           }
@@ -127,7 +443,21 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
 
   OneSidedDistance result;
   result.hausdorff = all.max;
-  result.farthest = all.farthest + to.origin();  // measured in `to`'s frame
+  result.farthest = all.farthest;
+  if (vertex_count > 0) {
+    // An eighth of the sampling's queries: enough to settle the maximum of a coarse mesh (a million samples
+    // on 2,000 faces of a horse needed 18,000), and to find the largest distances of a finer one without
+    // settling them (20,000 faces against 2 million: 250,000 queries found 0.00305 where the samples gave
+    // 0.00276).
+    const std::size_t budget = std::max<std::size_t>((area_count + vertex_count) / 8, std::size_t{1} << 16);
+    const RefinedMaximum refined = refine_maximum(source, to, shift, vertex_nearest, all.max, all.farthest,
+                                                  budget, options.progress, phase + ": refining");
+    result.hausdorff = refined.hausdorff;
+    result.farthest = refined.farthest;
+    result.hausdorff_bound = refined.bound;
+    result.hausdorff_settled = refined.settled;
+  }
+  result.farthest += to.origin();  // measured in `to`'s frame
   result.mean = averaged.sum / double(averaged.count);
   result.rms = std::sqrt(averaged.sum_squares / double(averaged.count));
   result.samples = area_count;
