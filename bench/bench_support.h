@@ -1,9 +1,10 @@
-// Small helpers the end-to-end benchmark programs share: process CPU time, medians, comma lists.
+// Small helpers the end-to-end benchmark programs share: process CPU time, medians, comma lists, distances.
 #pragma once
 
 #include <time.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,15 @@ inline std::vector<double> parse_list(const std::string& text) {
     start = comma + 1;
   }
   return out;
+}
+
+// A Hausdorff distance printed with `format`, and a "+" when it is a lower bound: `settled` false says a
+// refinement ran out of queries before settling its maximum (tools/compare.h; for the symmetric distance,
+// pass whether both directions settled).
+inline std::string hausdorff_text(double value, bool settled, const char* format) {
+  char text[48];
+  std::snprintf(text, sizeof text, format, value);
+  return settled ? std::string(text) : std::string(text) + "+";
 }
 
 }  // namespace ocsimp::bench
