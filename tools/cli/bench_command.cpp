@@ -1,5 +1,6 @@
 // ocsimp bench: every simplification method at every face target on one mesh, with time, memory, faces
 // reached and distance to the original (tools/bench_methods.h); bench/run_bench.sh drives it.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -116,6 +117,13 @@ void add_bench_command(CLI::App& app) {
     const std::vector<BenchResult> results = run_bench(input, methods, targets, ratios, options);
 
     std::fputs(bench_markdown_table(results).c_str(), stdout);
+    const bool lower_bounds = std::any_of(results.begin(), results.end(), [](const BenchResult& r) {
+      return r.distance && !(r.distance->forward.hausdorff_settled && r.distance->backward.hausdorff_settled);
+    });
+    if (lower_bounds)
+      std::printf(
+          "\nA Hausdorff distance marked + is a lower bound: its refinement ran out of queries (see "
+          "`ocsimp compare`).\n");
     HeldCommits held;  // both files appear once the table is out (see publish)
     auto write_text = [](const std::string& path, const std::string& text) {
       AtomicFile file(path);

@@ -252,7 +252,10 @@ nlohmann::ordered_json one_sided_json(const OneSidedDistance& d, const SurfaceDi
           {"mean_percent", all.percent(d.mean)},
           {"rms_percent", all.percent(d.rms)},
           {"samples", d.samples},
-          {"vertex_samples", d.vertex_samples}};
+          {"vertex_samples", d.vertex_samples},
+          {"hausdorff_bound",
+           std::isfinite(d.hausdorff_bound) ? nlohmann::ordered_json(d.hausdorff_bound) : nullptr},
+          {"hausdorff_settled", d.hausdorff_settled}};
 }
 
 }  // namespace
@@ -369,7 +372,9 @@ std::string bench_markdown_table(const std::vector<BenchResult>& results) {
            with_commas(r.faces) + " | " + seconds_text(r.seconds) + " | ";
     if (r.distance) {
       out += format("%.4f", r.distance->percent(r.distance->rms)) + " | " +
-             format("%.4f", r.distance->percent(r.distance->hausdorff)) + " | ";
+             format("%.4f", r.distance->percent(r.distance->hausdorff)) +
+             (r.distance->forward.hausdorff_settled && r.distance->backward.hausdorff_settled ? "" : "+") +
+             " | ";
     } else {
       out += "- | - | ";
     }

@@ -106,7 +106,8 @@ std::vector<BenchResult> run_bench(const BenchInput& input, const std::vector<Be
                                    const std::vector<double>& target_ratios, const BenchOptions& options);
 
 // Markdown, one row per result: mesh | target | method | faces | seconds | RMS % diag | Hausdorff % diag |
-// peak MiB ("-" where unknown).
+// peak MiB ("-" where unknown; a "+" after a Hausdorff distance whose refinement did not settle, a lower
+// bound: see compare.h).
 std::string bench_markdown_table(const std::vector<BenchResult>& results);
 // Every number, one row per result, with a header line.
 std::string bench_csv(const std::vector<BenchResult>& results);
