@@ -516,6 +516,23 @@ TEST(MeasureDistance, TheHausdorffDistanceIsRefinedToTheTrueMaximum) {
     EXPECT_LT(sampled.hausdorff, truth * 0.99);
     EXPECT_FALSE(std::isfinite(sampled.hausdorff_bound));
   }
+  // A larger budget never loosens the bound: a child's bound is capped by its parent's. A sphere against a
+  // turned finer one does not settle within the smallest budget.
+  IndexedMesh turned = test::sphere(5);
+  const Eigen::Matrix3f turn = Eigen::AngleAxisf(0.3f, Vec3f(1, 2, 3).normalized()).toRotationMatrix();
+  for (Vec3f& p : turned.positions) p = turn * p;
+  const DistanceIndex sphere(test::sphere(4)), finer(turned);
+  double previous = std::numeric_limits<double>::infinity();
+  for (std::size_t samples : {std::size_t{0}, std::size_t{1'000'000}, std::size_t{2'000'000}}) {
+    CompareOptions options;
+    options.samples = samples;
+    const OneSidedDistance d = measure_one_sided(sphere, finer, options);
+    EXPECT_LE(d.hausdorff_bound, previous) << samples;
+    previous = d.hausdorff_bound;
+    if (samples == 0) {
+      EXPECT_FALSE(d.hausdorff_settled);
+    }
+  }
   // A surface against itself (finely cut, so that corners sit on other triangles' edges) settles at 0: the
   // ties at its corners do not hold the bound up.
   const IndexedMesh fine = square(64, 0.0f, 1.0f);

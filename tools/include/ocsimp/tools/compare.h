@@ -6,9 +6,9 @@
 //   hausdorff = max d(p) over all of X: the largest over the area samples and the vertices of X, refined by
 //               branch and bound over X's triangles until the true maximum lies within 0.01 % above it
 //               (`hausdorff_bound` says where it ended, should its query budget, an eighth of the queries
-//               the samples took, run out first). Samples alone fall short where a large triangle bridges a
-//               gap away from its vertices. Refinement starts from the vertices: without them
-//               (include_vertices off) hausdorff is the area samples' largest alone;
+//               the samples took but from 2^16 to 2^19, run out first). Samples alone fall short where a
+//               large triangle bridges a gap away from its vertices. Refinement starts from the vertices:
+//               without them (include_vertices off) hausdorff is the area samples' largest alone;
 //   mean      = average d(p) over the area samples;
 //   rms       = sqrt(average d(p)^2) over the area samples.
 // Vertices only feed the maximum: they are not spread by area, so counting them in the averages would weight
