@@ -41,6 +41,12 @@ struct ChunkStats {
   }
 };
 
+// The float nearest x from above: it still bounds what x bounds.
+float round_up(double x) {
+  const float f = static_cast<float>(x);
+  return double(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
+
 // A vertex's distance to the other surface, rounded up to a float (it bounds, see refine_maximum), and the
 // triangle where it is reached: 8 bytes a vertex, kept for a whole mesh.
 struct NearestTriangle {
@@ -48,10 +54,7 @@ struct NearestTriangle {
   Index triangle = 0;
 
   static NearestTriangle of(const ClosestPoint& closest) {
-    const double d = std::sqrt(closest.distance_squared);
-    float f = static_cast<float>(d);
-    if (double(f) < d) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-    return {f, closest.triangle};
+    return {round_up(std::sqrt(closest.distance_squared)), closest.triangle};
   }
 };
 
@@ -168,18 +171,20 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
     float bound;    // the root's bound, rounded up
     Index triangle;
   };
-  auto round_up = [](double x) {
-    float f = static_cast<float>(x);
-    return double(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
-  };
   constexpr std::size_t chunk_triangles = 4096;
   const std::size_t chunks = (from.triangle_count + chunk_triangles - 1) / chunk_triangles;
   std::vector<std::vector<Candidate>> found(chunks);
   const double first_threshold = threshold();
-  auto corners_of = [&](std::size_t f) {
+  // Triangle f of `from` as a node, its corners as the vertices were measured.
+  auto root = [&](std::size_t f) {
     const Index* c = from.corners + 3 * f;
-    return std::array<Vec3d, 3>{from.vertex(c[0]) + shift, from.vertex(c[1]) + shift,
-                                from.vertex(c[2]) + shift};
+    RefineNode node;
+    for (int k = 0; k < 3; ++k) {
+      node.corner[k] = from.vertex(c[k]) + shift;
+      node.nearest[k] = vertex_nearest[c[k]].triangle;
+      node.distance[k] = vertex_nearest[c[k]].distance;
+    }
+    return node;
   };
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, chunks, 1),
@@ -187,23 +192,19 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
         for (std::size_t chunk = range.begin(); chunk < range.end(); ++chunk) {
           const std::size_t last = std::min(from.triangle_count, (chunk + 1) * chunk_triangles);
           for (std::size_t f = chunk * chunk_triangles; f < last; ++f) {
-            const Index* c = from.corners + 3 * f;
-            const double d0 = vertex_nearest[c[0]].distance, d1 = vertex_nearest[c[1]].distance,
-                         d2 = vertex_nearest[c[2]].distance;
-            const std::array<Vec3d, 3> p = corners_of(f);
+            const RefineNode node = root(f);
+            const auto& p = node.corner;
+            const auto [d0, d1, d2] = node.distance;
             const double e01 = (p[1] - p[0]).squaredNorm(), e12 = (p[2] - p[1]).squaredNorm(),
                          e20 = (p[0] - p[2]).squaredNorm();
             // A corner's farthest reach within the triangle is its longer edge; first a coarser test with one
             // square root, which settles nearly every triangle of a fine surface.
-            const double reached = std::max({d0, d1, d2});
+            const double reached = node.reached();
             if (!(reached + std::sqrt(std::max({e01, e12, e20})) > first_threshold)) continue;
             const double reach =
                 std::min({d0 + std::sqrt(std::max(e01, e20)), d1 + std::sqrt(std::max(e01, e12)),
                           d2 + std::sqrt(std::max(e12, e20))});
             if (!(reach > first_threshold)) continue;
-            RefineNode node;
-            node.corner = p;
-            for (int k = 0; k < 3; ++k) node.nearest[k] = vertex_nearest[c[k]].triangle;
             const double bound = node_bound(target, node);
             if (bound > first_threshold)
               found[chunk].push_back({round_up(reached), round_up(bound), static_cast<Index>(f)});
@@ -235,15 +236,10 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
       [&](const tbb::blocked_range<std::size_t>& range) {
         for (std::size_t i = range.begin(); i < range.end(); ++i) {
           RefineNode& node = nodes[i];
-          const Index* c = from.corners + 3 * std::size_t{candidates[i].triangle};
-          node.corner = corners_of(candidates[i].triangle);
-          for (int k = 0; k < 3; ++k) {
-            node.nearest[k] = vertex_nearest[c[k]].triangle;
-            node.distance[k] = vertex_nearest[c[k]].distance;
-          }
+          node = root(candidates[i].triangle);
           // Corners on `to` (a surface measured against a part of itself) get an inside probe.
           node.probe = candidates[i].reached <= floor;
-          node.bound = node_bound(target, node);
+          node.bound = candidates[i].bound;
         }
       },
       tbb::simple_partitioner());
