@@ -38,8 +38,8 @@ inline std::vector<double> parse_list(const std::string& text) {
 }
 
 // A Hausdorff distance printed with `format`, and a "+" when it is a lower bound: `settled` false says a
-// refinement ran out of queries before settling its maximum (tools/compare.h; for the symmetric distance,
-// pass whether both directions settled).
+// refinement ran out of queries before settling its maximum (tools/compare.h: SurfaceDistance's
+// hausdorff_settled()).
 inline std::string hausdorff_text(double value, bool settled, const char* format) {
   char text[48];
   std::snprintf(text, sizeof text, format, value);

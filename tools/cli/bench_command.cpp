@@ -118,7 +118,7 @@ void add_bench_command(CLI::App& app) {
 
     std::fputs(bench_markdown_table(results).c_str(), stdout);
     const bool lower_bounds = std::any_of(results.begin(), results.end(), [](const BenchResult& r) {
-      return r.distance && !(r.distance->forward.hausdorff_settled && r.distance->backward.hausdorff_settled);
+      return r.distance && !r.distance->hausdorff_settled();
     });
     if (lower_bounds)
       std::printf(

@@ -373,8 +373,7 @@ std::string bench_markdown_table(const std::vector<BenchResult>& results) {
     if (r.distance) {
       out += format("%.4f", r.distance->percent(r.distance->rms)) + " | " +
              format("%.4f", r.distance->percent(r.distance->hausdorff)) +
-             (r.distance->forward.hausdorff_settled && r.distance->backward.hausdorff_settled ? "" : "+") +
-             " | ";
+             (r.distance->hausdorff_settled() ? "" : "+") + " | ";
     } else {
       out += "- | - | ";
     }

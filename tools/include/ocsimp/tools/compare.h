@@ -121,6 +121,10 @@ struct SurfaceDistance {
   double hausdorff = 0, mean = 0, rms = 0;  // symmetric, as defined at the top of this file
   double diagonal = 0;                      // of the original's bounding box
 
+  // Both directions' refinements settled: `hausdorff` is within the tolerance of the true one, not a lower
+  // bound.
+  bool hausdorff_settled() const { return forward.hausdorff_settled && backward.hausdorff_settled; }
+
   // `distance` as a percentage of the diagonal; NaN when the diagonal is 0 (the original is a point: there is
   // no share to take, and 0 read as a perfect match). JSON writes it as null.
   double percent(double distance) const {
