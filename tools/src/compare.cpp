@@ -58,6 +58,15 @@ struct NearestTriangle {
   }
 };
 
+// The closest point of `to` to p, searched within `bound`, a distance computed to a point on the surface
+// (`scale`: that point's largest coordinate). Widened a little, as the computed point may sit a rounding
+// error off its triangle; searched again unbounded should rounding defeat the widening.
+ClosestPoint closest_within(const DistanceIndex& to, const Vec3d& p, double bound, double scale) {
+  const ClosestPoint closest =
+      to.closest_point(p, bound * (1 + 1e-9) + 1e-12 * std::max(p.cwiseAbs().maxCoeff(), scale));
+  return closest.distance_squared < std::numeric_limits<double>::infinity() ? closest : to.closest_point(p);
+}
+
 // Distances from `points` (moved by `shift` into `to`'s frame) to `to`, each search bounded by the distance
 // to the previous point's closest point, which lies on the surface: neighbouring samples are close, so this
 // prunes most of the BVH at once. When `nearest` is given, each point's nearest triangle goes there too.
@@ -71,14 +80,9 @@ ChunkStats measure_points(const DistanceIndex& to, Vec3d* points, std::size_t co
   bool have_previous = false;
   for (std::size_t i = 0; i < count; ++i) {
     const Vec3d& p = points[i];
-    // Widened a little: `previous` was computed, so it may sit a rounding error off its triangle.
-    const double bound = have_previous
-                             ? (p - previous).norm() * (1 + 1e-9) +
-                                   1e-12 * std::max(p.cwiseAbs().maxCoeff(), previous.cwiseAbs().maxCoeff())
-                             : std::numeric_limits<double>::infinity();
-    ClosestPoint closest = to.closest_point(p, bound);
-    if (!(closest.distance_squared < std::numeric_limits<double>::infinity()))
-      closest = to.closest_point(p);  // only if rounding defeated the widening above
+    const ClosestPoint closest =
+        have_previous ? closest_within(to, p, (p - previous).norm(), previous.cwiseAbs().maxCoeff())
+                      : to.closest_point(p);
     stats.add(std::sqrt(closest.distance_squared), p);
     if (nearest) nearest[i] = NearestTriangle::of(closest);
     previous = closest.point;
@@ -111,12 +115,11 @@ struct RefineNode {
   std::array<Vec3d, 3> corner;     // in `to`'s frame
   std::array<Index, 3> nearest;    // `to`'s triangle closest to each corner
   std::array<double, 3> distance;  // to `to`, of each corner
-  // `to`'s triangle nearest a point inside the node (its root's centroid), once probed; for nodes whose
-  // corners lie on `to` (a surface measured against a part of itself). There the corners' nearest triangles
-  // are ties, won by any triangle of their fans, which would leave a bound of the node's size at every depth.
+  // `to`'s triangle nearest a point inside the node (its root's centroid), for nodes whose corners lie on
+  // `to` (a surface measured against a part of itself). There the corners' nearest triangles are ties, won
+  // by any triangle of their fans, which would leave a bound of the node's size at every depth.
   Index inside = kNone;
-  bool probe = false;  // to be probed before it is split
-  double bound = 0;    // of d over the node's triangle
+  double bound = 0;  // of d over the node's triangle
 
   static constexpr Index kNone = std::numeric_limits<Index>::max();
 
@@ -140,6 +143,17 @@ double node_bound(const DistanceIndex::Impl& to, const RefineNode& node) {
     best = std::min(best, farthest);
   }
   return std::sqrt(best);
+}
+
+// The closest point of `to` to p, a point of the node's triangle: d is 1-Lipschitz, so a corner's distance
+// plus the way from it bounds p's, which prunes the search as the previous sample's does in measure_points.
+// `point` is p itself, where the distance was reached.
+ClosestPoint closest_in_node(const DistanceIndex& to, const RefineNode& node, const Vec3d& p) {
+  double bound = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 3; ++k) bound = std::min(bound, node.distance[k] + (p - node.corner[k]).norm());
+  ClosestPoint closest = closest_within(to, p, bound, 0.0);
+  closest.point = p;
+  return closest;
 }
 
 struct RefinedMaximum {
@@ -230,20 +244,32 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
     std::sort(candidates.begin(), candidates.end(),
               [](const Candidate& a, const Candidate& b) { return a.triangle < b.triangle; });
   }
+  // Roots whose corners lie on `to` are probed at their centroid (a query each, at most the budget).
   std::vector<RefineNode> nodes(candidates.size());
+  std::vector<ClosestPoint> probes(candidates.size());
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, candidates.size(), chunk_triangles),
       [&](const tbb::blocked_range<std::size_t>& range) {
         for (std::size_t i = range.begin(); i < range.end(); ++i) {
           RefineNode& node = nodes[i];
           node = root(candidates[i].triangle);
-          // Corners on `to` (a surface measured against a part of itself) get an inside probe.
-          node.probe = candidates[i].reached <= floor;
           node.bound = candidates[i].bound;
+          if (!(candidates[i].reached <= floor)) continue;
+          probes[i] = closest_in_node(to, node, (node.corner[0] + node.corner[1] + node.corner[2]) / 3.0);
+          node.inside = probes[i].triangle;
+          node.bound = std::min(node.bound, node_bound(target, node));
         }
       },
       tbb::simple_partitioner());
+  std::size_t queries = 0;
+  for (const ClosestPoint& probe : probes) {
+    if (probe.triangle == RefineNode::kNone) continue;  // not probed
+    ++queries;
+    const double d = std::sqrt(probe.distance_squared);
+    if (d > result.hausdorff) result.hausdorff = d, result.farthest = probe.point;
+  }
   candidates = {};
+  probes = {};
   // Nodes are split in batches, in parallel. The batches alternate between two orders: the largest corner
   // distance first (a search: it climbs to the maximum near the largest distances found) and the largest
   // bound first (a proof: it shrinks the bound wherever it is loosest, and finds maxima the search did not
@@ -264,7 +290,6 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
   std::make_heap(bound_heap.begin(), bound_heap.end(), by_bound);
 
   constexpr std::size_t batch_nodes = 1024, chunk_nodes = 64;
-  std::size_t queries = 0;
   std::vector<Order> batch;
   std::vector<RefineNode> children;
   std::vector<ClosestPoint> midpoints;
@@ -300,33 +325,11 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
         [&](const tbb::blocked_range<std::size_t>& range) {
           for (std::size_t b = range.begin(); b < range.end(); ++b) {
             const RefineNode& node = nodes[batch[b]];
-            // d is 1-Lipschitz: a corner's distance plus the way from it bounds a point's distance, which
-            // prunes the search as the previous sample's does in measure_points (widened alike for rounding).
-            auto measure = [&](const Vec3d& p, ClosestPoint& m) {
-              double bound = std::numeric_limits<double>::infinity();
-              for (int k = 0; k < 3; ++k)
-                bound = std::min(bound, node.distance[k] + (p - node.corner[k]).norm());
-              m = to.closest_point(p, bound * (1 + 1e-9) + 1e-12 * p.cwiseAbs().maxCoeff());
-              if (!(m.distance_squared < std::numeric_limits<double>::infinity())) m = to.closest_point(p);
-              m.point = p;  // kept for the farthest point below
-            };
-            if (node.probe) {
-              // A root is probed at its centroid first, and comes back with its new bound.
-              RefineNode& probed = children[4 * b];
-              probed = node;
-              measure((node.corner[0] + node.corner[1] + node.corner[2]) / 3.0, midpoints[3 * b]);
-              probed.inside = midpoints[3 * b].triangle;
-              probed.probe = false;
-              probed.bound = node_bound(target, probed);
-              for (int k = 1; k < 3; ++k) midpoints[3 * b + k].distance_squared = -1;  // no query
-              for (int k = 1; k < 4; ++k) children[4 * b + k].bound = 0;               // no node
-              continue;
-            }
             RefineNode mid;
             mid.inside = node.inside;
             for (int k = 0; k < 3; ++k) {
               ClosestPoint& m = midpoints[3 * b + k];
-              measure(0.5 * (node.corner[k] + node.corner[(k + 1) % 3]), m);
+              m = closest_in_node(to, node, 0.5 * (node.corner[k] + node.corner[(k + 1) % 3]));
               mid.corner[k] = m.point;
               mid.nearest[k] = m.triangle;
               mid.distance[k] = std::sqrt(m.distance_squared);
@@ -340,7 +343,6 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
               child.nearest = {node.nearest[k], mid.nearest[k], mid.nearest[in]};
               child.distance = {node.distance[k], mid.distance[k], mid.distance[in]};
               child.inside = node.inside;
-              child.probe = false;
             }
             children[4 * b + 3] = mid;
             // A child lies inside its parent, so the parent's bound holds for it too: bounds never grow down
@@ -350,9 +352,8 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
           }
         },
         tbb::simple_partitioner());
+    queries += midpoints.size();
     for (const ClosestPoint& m : midpoints) {
-      if (m.distance_squared < 0) continue;
-      ++queries;
       const double d = std::sqrt(m.distance_squared);
       if (d > result.hausdorff) result.hausdorff = d, result.farthest = m.point;
     }
