@@ -156,22 +156,14 @@ ClosestPoint closest_in_node(const DistanceIndex& to, const RefineNode& node, co
   return closest;
 }
 
-struct RefinedMaximum {
-  double hausdorff = 0;
-  Vec3d farthest = Vec3d::Zero();  // in `to`'s frame
-  double bound = 0;                // the true maximum is at most this
-  bool settled = false;            // within the tolerance of `hausdorff`
-};
-
-// Refines the sampled maximum `sampled` (reached at `sampled_at`) of d over `from`, whose vertices' closest
-// points on `to` are `vertex_nearest` (indexed by vertex; only referenced ones are used). At most `budget`
-// closest-point queries; should they run out, `bound` says how far the answer may still be short.
-RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceIndex& to, const Vec3d& shift,
-                              const std::vector<NearestTriangle>& vertex_nearest, double sampled,
-                              const Vec3d& sampled_at, std::size_t budget, const ProgressFn& progress,
-                              const std::string& phase) {
+// Refines `result`'s sampled maximum of d over `from` (its hausdorff, reached at its farthest, in `to`'s
+// frame) and sets its hausdorff_bound and hausdorff_settled. `vertex_nearest` holds the closest points of
+// `from`'s vertices on `to` (indexed by vertex; only referenced ones are used). At most `budget`
+// closest-point queries; should they run out, the bound says how far the answer may still be short.
+void refine_maximum(const DistanceIndex::Impl& from, const DistanceIndex& to, const Vec3d& shift,
+                    const std::vector<NearestTriangle>& vertex_nearest, std::size_t budget,
+                    const ProgressFn& progress, const std::string& phase, OneSidedDistance& result) {
   const DistanceIndex::Impl& target = to.impl();
-  RefinedMaximum result{sampled, sampled_at, sampled};
   // The absolute floor keeps rounding (and a surface measured against itself, where the maximum is 0) from
   // splitting without end.
   const double floor = 1e-9 * from.bounds.diagonal() + 1e-12 * from.coordinate_scale;
@@ -371,11 +363,10 @@ RefinedMaximum refine_maximum(const DistanceIndex::Impl& from, const DistanceInd
     report(progress, phase, queries, budget);
   }
   report(progress, phase, budget, budget);
-  result.bound = std::max(threshold(), unsettled);
+  result.hausdorff_bound = std::max(threshold(), unsettled);
   for (Order n : bound_heap)
-    if (!split[n]) result.bound = std::max(result.bound, nodes[n].bound);
-  result.settled = !(result.bound > threshold());
-  return result;
+    if (!split[n]) result.hausdorff_bound = std::max(result.hausdorff_bound, nodes[n].bound);
+  result.hausdorff_settled = !(result.hausdorff_bound > threshold());
 }
 }  // namespace
 
@@ -409,7 +400,6 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
           std::array<Vec3d, chunk_samples> points;
           for (std::size_t chunk = range.begin(); chunk < range.end(); ++chunk) {
             std::size_t n = 0;
-            std::array<NearestTriangle, chunk_samples> nearest;
             if (chunk < area_chunks) {
               const std::size_t first = chunk * chunk_samples;
               const std::size_t last = std::min(area_count, first + chunk_samples);
@@ -421,6 +411,7 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
               for (std::size_t i = first; i < last; ++i)
                 points[i - first] = source.vertex(source.referenced_vertices[i]);
               n = last - first;
+              std::array<NearestTriangle, chunk_samples> nearest;
               stats[chunk] = measure_points(to, points.data(), n, shift, nearest.data());
               for (std::size_t i = first; i < last; ++i)
                 vertex_nearest[source.referenced_vertices[i]] = nearest[i - first];
@@ -452,12 +443,7 @@ OneSidedDistance measure_one_sided(const DistanceIndex& from, const DistanceInde
     // triangulations of one surface), while the sampling takes no memory per sample.
     const std::size_t budget =
         std::clamp<std::size_t>((area_count + vertex_count) / 8, std::size_t{1} << 16, std::size_t{1} << 19);
-    const RefinedMaximum refined = refine_maximum(source, to, shift, vertex_nearest, all.max, all.farthest,
-                                                  budget, options.progress, phase + ": refining");
-    result.hausdorff = refined.hausdorff;
-    result.farthest = refined.farthest;
-    result.hausdorff_bound = refined.bound;
-    result.hausdorff_settled = refined.settled;
+    refine_maximum(source, to, shift, vertex_nearest, budget, options.progress, phase + ": refining", result);
   }
   result.farthest += to.origin();  // measured in `to`'s frame
   result.mean = averaged.sum / double(averaged.count);
