@@ -2930,8 +2930,8 @@ struct Decimator {
       BigVector<Index>().swap(vf);
       BigVector<Edge>().swap(edges);
       std::vector<Index>().swap(storage.face_origin);
-      stats.seam_copies =
-          decimate_detail::restore_attributes(storage.seam_source, origin_of, out, quadrics, storage.seams);
+      stats.seam_copies = decimate_detail::restore_attributes(storage.seam_source, origin_of, out, quadrics,
+                                                              areas, storage.seams);
     }
     return out;
   }

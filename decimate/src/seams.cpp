@@ -305,7 +305,8 @@ std::vector<Index> same_attribute_targets(const IndexedMesh& mesh,
 }
 
 std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Index>& face_origin,
-                                 IndexedMesh& out, std::vector<Quadric>* quadrics, bool split_seams) {
+                                 IndexedMesh& out, std::vector<Quadric>* quadrics, std::vector<double>* areas,
+                                 bool split_seams) {
   const std::size_t nv = out.positions.size(), nf = out.triangles.size();
   const FaceLists lists(source);
 
@@ -390,15 +391,18 @@ std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Ind
   if (!source.uvs.empty()) split.uvs.resize(total);
   if (!source.colors.empty()) split.colors.resize(total);
   std::vector<Quadric> split_quadrics(quadrics ? total : 0);
+  std::vector<double> split_areas(areas ? total : 0);
   for (std::size_t v = 0; v < nv; ++v) {
     const std::size_t count = sides[v + 1] - sides[v];
     for (std::size_t k = 0; k < count; ++k) {
       const std::size_t to = sides[v] + k;
       split.positions[to] = out.positions[v];
+      const double share = 1.0 / static_cast<double>(count);
       if (quadrics) {
         split_quadrics[to] = (*quadrics)[v];
-        if (count > 1) split_quadrics[to] *= 1.0 / static_cast<double>(count);
+        if (count > 1) split_quadrics[to] *= share;
       }
+      if (areas) split_areas[to] = (*areas)[v] * share;
     }
   }
   split.triangles.resize(nf);
@@ -421,6 +425,7 @@ std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Ind
   }
   out = std::move(split);
   if (quadrics) *quadrics = std::move(split_quadrics);
+  if (areas) *areas = std::move(split_areas);
   return total - nv;
 }
 

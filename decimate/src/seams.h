@@ -40,10 +40,11 @@ std::vector<Index> same_attribute_targets(const IndexedMesh& mesh, const std::ve
 // differ; without (an input without seams), each vertex has one side, and takes the attributes where a walk
 // from its first corner ends. `face_origin[f]` is the index in source.triangles of the input face output face
 // f descends from; `out` holds positions and triangles (its attribute arrays are replaced) and `quadrics`,
-// when not null, one quadric per vertex, which a split vertex shares out evenly among its copies, so that
-// welding them again (the next level of an LOD chain) adds them back up to the whole. Returns the vertices
-// added.
+// and `areas`, when not null, one quadric and its area per vertex, which a split vertex shares out evenly
+// among its copies, so that welding them again (the next level of an LOD chain) adds them back up to the
+// whole. Returns the vertices added.
 std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Index>& face_origin,
-                                 IndexedMesh& out, std::vector<Quadric>* quadrics, bool split_seams);
+                                 IndexedMesh& out, std::vector<Quadric>* quadrics, std::vector<double>* areas,
+                                 bool split_seams);
 
 }  // namespace ocsimp::decimate_detail

@@ -275,6 +275,16 @@ TEST(Seams, SplitVerticesShareOutTheirQuadric) {
   const double scale = input.a00 + input.a11 + input.a22;
   EXPECT_NEAR(output.a00 + output.a11 + output.a22, scale, 1e-9 * scale);
   EXPECT_NEAR(output.c, input.c, 1e-9 * scale);
+  // Their areas are shared out the same way, one a copy (the next level of an LOD chain refused the result:
+  // 300 areas for 330 quadrics).
+  ASSERT_EQ(r.areas.size(), r.quadrics.size());
+  double area = 0;
+  for (double a : r.areas) area += a;
+  EXPECT_NEAR(area, scale, 1e-7 * scale);  // the areas are summed apart from the quadrics
+  o.target_faces = 100;
+  const DecimateResult next = decimate(QuadricMesh{r.mesh, r.quadrics, r.areas}, o);
+  EXPECT_EQ(next.mesh.face_count(), 100u);
+  EXPECT_GT(next.stats.seam_copies, 0u);
 }
 
 TEST(Seams, TheSameInputGivesTheSameBytesAtAnyThreadCount) {
