@@ -135,6 +135,36 @@ void unpack_marking(Vec3f& slot, std::uint32_t& cell, std::uint64_t& q) {
   q = low | static_cast<std::uint64_t>(high & ~kMark) << 32;
 }
 
+// A packed vertex's position, from its cell and quanta. The face pass may be marking the slot meanwhile
+// (unpack_marking): its last word is read through a relaxed atomic, and the mark masked off.
+Vec3f packed_position(const Vec3f& slot, const std::vector<CellKey>& keys, const Grid& grid) {
+  using Word = std::uint32_t __attribute__((may_alias));
+  const char* bytes = reinterpret_cast<const char*>(slot.data());
+  std::uint32_t cell, low;
+  std::memcpy(&cell, bytes, 4);
+  std::memcpy(&low, bytes + 4, 4);
+  const std::uint32_t high = __atomic_load_n(reinterpret_cast<const Word*>(bytes + 8), __ATOMIC_RELAXED);
+  const std::uint64_t q = (low | static_cast<std::uint64_t>(high) << 32) & ~kReferenced;
+  return (grid.cell_origin(keys[cell]) + dequantize(q) * grid.cell).cast<float>();
+}
+
+// Points a stream's position source at the packed vertices for as long as it lives.
+class PositionsFromCells {
+ public:
+  PositionsFromCells(TriangleStream& stream, const Vec3f* packed, const std::vector<CellKey>& keys,
+                     const Grid& grid)
+      : stream_(stream) {
+    stream_.set_position_source(
+        [packed, &keys, grid](Index v) { return packed_position(packed[v], keys, grid); });
+  }
+  ~PositionsFromCells() { stream_.set_position_source({}); }
+  PositionsFromCells(const PositionsFromCells&) = delete;
+  PositionsFromCells& operator=(const PositionsFromCells&) = delete;
+
+ private:
+  TriangleStream& stream_;
+};
+
 // Returns the whole pages inside [begin, end) to the system; their contents read as zeros afterwards. For
 // arrays whose data is dead but whose owner frees them only later.
 void release_pages(const void* begin, const void* end) {
@@ -1108,6 +1138,10 @@ FineCells accumulate_indexed(TriangleStream& stream, const PassOptions& options)
     }
   }
 
+  // The stream splits the polygons still to come by their corners' positions, which the packing has
+  // overwritten: it reads them back from the cells, to 2^-21 of a cell (a fan of garbage cut concave
+  // polygons across their outside, and quads along either diagonal).
+  const PositionsFromCells positions_from_cells(stream, positions.data(), cells.keys, grid);
 #ifdef __GLIBC__
   // The temporaries above (per-thread key sets, the key -> cell map) were freed into the heap; give their
   // pages back before the face pass, the memory peak, allocates its own.

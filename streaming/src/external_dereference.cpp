@@ -418,6 +418,9 @@ class DereferencedStream final : public TriangleStream {
       // vertex array, and it goes on with the faces.
       spool_.unpack_into(vertices_);
       vertices_from_spool_ = true;
+      // The reader kept no positions to split its polygons by: it reads this stream's (or wherever a
+      // consumer of scratch_vertices() says they went).
+      inner_->set_position_source([this](Index v) { return position(v); });
       return;
     }
     if (!spool_.spilled()) {
@@ -435,6 +438,7 @@ class DereferencedStream final : public TriangleStream {
         };
       }
       inner_ = open_triangle_stream(path, plain);
+      inner_->set_position_source([this](Index v) { return position(v); });  // as above
       return;
     }
     left_out_ = inner_->attributes_left_out();

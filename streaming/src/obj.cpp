@@ -457,11 +457,10 @@ class ObjStream final : public TriangleStream {
     if (corners_.size() == 3) return emit(Triangle{corners_[0].v, corners_[1].v, corners_[2].v});
     polygon_.clear();
     for (const Corner& c : corners_) polygon_.push_back(c.v);
-    if (vertex_sink_) return fan_triangles(polygon_.data(), polygon_.size(), emit);
+    if (!positions_known()) return fan_triangles(polygon_.data(), polygon_.size(), emit);
     polygon_triangles(
-        polygon_.data(), polygon_.size(),
-        [&](std::size_t i) -> const Vec3f& { return vertices_.positions[polygon_[i]]; }, polygon_scratch_,
-        emit);
+        polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },
+        polygon_scratch_, emit);
   }
 
   void flush_sink() {

@@ -1311,7 +1311,7 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
       }
     }
     strip_before_ = previous_corner_;
-  } else if (polygon_size_ > 3 && !vertex_sink_) {
+  } else if (polygon_size_ > 3 && positions_known()) {
     polygon_.push_back(static_cast<Index>(index));
     if (polygon_.size() == polygon_size_) emit_polygon();
   } else if (corners_seen_ == 0) {
@@ -1327,8 +1327,8 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
 
 void PlyStream::emit_polygon() {
   polygon_triangles(
-      polygon_.data(), polygon_.size(),
-      [&](std::size_t i) -> const Vec3f& { return vertices_.positions[polygon_[i]]; }, polygon_scratch_,
+      polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },
+      polygon_scratch_,
       [&](const Triangle& t) {
         if (filled_ < capacity_)
           out_[filled_++] = t;

@@ -6,10 +6,12 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <numeric>
 #include <random>
+#include <set>
 
 #include "ocsimp/core/error.h"
 #include "ocsimp/streaming/io.h"
@@ -1333,6 +1335,81 @@ TEST(Cluster, ClustersASharedMeshFromDisk) {
   EXPECT_GT(out.mesh.face_count(), 1000u);
   EXPECT_LT(out.mesh.face_count(), faces);
   EXPECT_EQ(analyze_topology(out.mesh).degenerate_faces, 0u);
+}
+
+// The cluster stage packs each vertex's cell into its position's bytes before the faces come, and a reader
+// splits a polygon by its corners' positions: it read the packed bytes, so a concave polygon was cut
+// across its outside (a star's output covered 2.5 times its area) and a quad along either diagonal.
+TEST(Cluster, PolygonsAreSplitAsTheReaderSplitsThem) {
+  test::TempDir dir;
+  // A comb of two notches (concave, area 17) in the plane z = 0, then a ring of bent quads.
+  std::string obj =
+      "v 0 0 0\nv 7 0 0\nv 7 3 0\nv 6 3 0\nv 6 1 0\nv 5 1 0\nv 5 3 0\nv 4 3 0\nv 4 1 0\n"
+      "v 3 1 0\nv 3 3 0\nv 0 3 0\nf 1 2 3 4 5 6 7 8 9 10 11 12\n";
+  const int ring = 12;
+  for (int i = 0; i < ring; ++i) {
+    const double a = 2 * M_PI * i / ring;
+    char line[128];
+    std::snprintf(line, sizeof line, "v %.9f %.9f %.9f\nv %.9f %.9f %.9f\n", 10 * std::cos(a),
+                  10 * std::sin(a), 5 + 0.3 * (i % 2), 11 * std::cos(a), 11 * std::sin(a), 5.0);
+    obj += line;
+  }
+  for (int i = 0; i < ring; ++i) {
+    const int a = 13 + 2 * i, b = 13 + 2 * ((i + 1) % ring);
+    obj += "f " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(b + 1) + " " +
+           std::to_string(a + 1) + "\n";
+  }
+  std::ofstream(dir / "polygons.obj") << obj;
+  const IndexedMesh expected = read_mesh(dir / "polygons.obj");
+  ASSERT_EQ(expected.face_count(), 10u + 2 * ring);
+  write_mesh(dir / "polygons.ply", expected);  // triangles: the same split, as a reference
+  std::ofstream(dir / "polygons_ascii.ply") << [&] {
+    // The same polygons as a PLY's faces.
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex " + std::to_string(expected.vertex_count()) +
+                      "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                      std::to_string(1 + ring) + "\nproperty list uchar int vertex_indices\nend_header\n";
+    for (const Vec3f& p : expected.positions) {
+      char line[96];
+      std::snprintf(line, sizeof line, "%.9g %.9g %.9g\n", p.x(), p.y(), p.z());
+      ply += line;
+    }
+    ply += "12 0 1 2 3 4 5 6 7 8 9 10 11\n";
+    for (int i = 0; i < ring; ++i) {
+      const int a = 12 + 2 * i, b = 12 + 2 * ((i + 1) % ring);
+      ply += "4 " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(b + 1) + " " +
+             std::to_string(a + 1) + "\n";
+    }
+    return ply;
+  }();
+  using Corners = std::array<std::array<float, 3>, 3>;
+  auto triangles = [](const IndexedMesh& m) {
+    std::set<Corners> out;
+    for (const Triangle& t : m.triangles) {
+      Corners c;
+      for (int k = 0; k < 3; ++k)
+        c[k] = {m.positions[t[k]].x(), m.positions[t[k]].y(), m.positions[t[k]].z()};
+      std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+      out.insert(c);
+    }
+    return out;
+  };
+  double comb_area = 0;
+  for (const Triangle& t : expected.triangles) {
+    const Vec3d a = expected.positions[t[0]].cast<double>(), b = expected.positions[t[1]].cast<double>(),
+                c = expected.positions[t[2]].cast<double>();
+    if (a.z() == 0 && b.z() == 0 && c.z() == 0) comb_area += (b - a).cross(c - a).norm() / 2;
+  }
+  EXPECT_NEAR(comb_area, 17.0, 1e-9);  // the reader's own split stays inside the outline
+  // Cells far smaller than the edges, and mean placement: every vertex is its own cell, in place.
+  for (const std::string name : {"polygons.obj", "polygons_ascii.ply"}) {
+    for (std::uint64_t budget : {std::uint64_t{0}, std::uint64_t{1} << 30}) {
+      ReadOptions read;
+      read.memory_budget = budget;  // as the command opens it: an OBJ's vertices pass a spool first
+      auto stream = open_triangle_stream(dir / name, read);
+      const QuadricMesh out = cluster(*stream, grid_options(4096, Representative::mean));
+      EXPECT_EQ(triangles(out.mesh), triangles(expected)) << name << " " << budget;
+    }
+  }
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -56,8 +57,13 @@ class TriangleStream {
   // the array's memory as scratch (the cluster stage packs each vertex's cell into its 12 bytes, to stay
   // within 12 bytes a vertex). Afterwards vertices() holds that consumer's data, not positions. While batches
   // remain the array's sizes must be kept; once next() has returned false the consumer may release it.
-  // Streams never read their vertex array back after loading it, so next() is unaffected.
+  // A stream reads its positions back only to split the polygons still to come, through position(): a
+  // consumer that overwrites them must first say where they are now (set_position_source), or a concave
+  // polygon is cut by garbage.
   IndexedMesh& scratch_vertices() { return const_cast<IndexedMesh&>(vertices()); }
+  // Where vertex v's position is read from, in place of the vertex array, until set again (empty: the
+  // array). Set it between calls to next(), which calls it (on its own thread); it must not throw.
+  void set_position_source(std::function<Vec3f(Index)> source) { position_source_ = std::move(source); }
 
   // Bounding box of every vertex. Known up front for indexed streams; a soup may scan its input once for it.
   virtual Box3 bounds() = 0;
@@ -76,6 +82,15 @@ class TriangleStream {
   // OBJ dereferenced out of core delivers its corners' positions and vertex colors only. Empty when nothing
   // is left out.
   virtual std::string attributes_left_out() const { return {}; }
+
+ protected:
+  // What a reader splitting a polygon by its corners' positions may rely on: a source was set, or the
+  // vertex array holds positions (a reader handing its vertices to a sink keeps none, and fans).
+  bool positions_known() const { return position_source_ || !vertices().positions.empty(); }
+  Vec3f position(Index v) const { return position_source_ ? position_source_(v) : vertices().positions[v]; }
+
+ private:
+  std::function<Vec3f(Index)> position_source_;
 };
 
 }  // namespace ocsimp
