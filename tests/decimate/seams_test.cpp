@@ -287,6 +287,68 @@ TEST(Seams, SplitVerticesShareOutTheirQuadric) {
   EXPECT_GT(next.stats.seam_copies, 0u);
 }
 
+// Every face its own three vertices with the face's normal: flat shading, as exporters write it.
+IndexedMesh flat_shaded(const IndexedMesh& mesh) {
+  IndexedMesh flat;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3f n = (mesh.positions[t[1]] - mesh.positions[t[0]])
+                        .cross(mesh.positions[t[2]] - mesh.positions[t[0]])
+                        .normalized();
+    const Index first = static_cast<Index>(flat.positions.size());
+    for (Index v : t) {
+      flat.positions.push_back(mesh.positions[v]);
+      flat.normals.push_back(n);
+    }
+    flat.triangles.push_back({first, first + 1, first + 2});
+  }
+  return flat;
+}
+
+// A seam whose sides differ only by a normal within 30 degrees is flat shading's, not a crease: a
+// flat-shaded torus decimates as the torus without normals does (its seam planes pinned every vertex: 22
+// times the error), while a flat-shaded cube keeps its 90-degree edges as seams, corners and all.
+TEST(Seams, FlatShadingIsNotACrease) {
+  IndexedMesh torus = uv_torus(48, 24);
+  torus.normals.clear();
+  torus.uvs.clear();
+  DecimateOptions o;
+  o.target_faces = 460;
+  const DecimateResult smooth = decimate(QuadricMesh{torus, {}}, o);
+  const DecimateResult flat = decimate(QuadricMesh{flat_shaded(torus), {}}, o);
+  auto farthest = [](const IndexedMesh& m) {
+    double d = 0;
+    for (const Vec3f& p : m.positions)
+      d = std::max(d, std::abs(std::hypot(std::hypot(p.x(), p.y()) - kMajor, double(p.z())) - kMinor));
+    return d;
+  };
+  ASSERT_EQ(flat.mesh.face_count(), smooth.mesh.face_count());
+  EXPECT_LE(farthest(flat.mesh), 1.05 * farthest(smooth.mesh));
+  // The output is flat-shaded still: every corner's normal is near its own face's.
+  ASSERT_EQ(flat.mesh.normals.size(), flat.mesh.vertex_count());
+  for (const Triangle& t : flat.mesh.triangles) {
+    const Vec3f n = (flat.mesh.positions[t[1]] - flat.mesh.positions[t[0]])
+                        .cross(flat.mesh.positions[t[2]] - flat.mesh.positions[t[0]])
+                        .normalized();
+    for (Index v : t) EXPECT_GT(flat.mesh.normals[v].dot(n), std::cos(0.25 * kPi));
+  }
+
+  const IndexedMesh cube = flat_shaded(test::cube(6));
+  o.target_faces = 12;
+  const DecimateResult r = decimate(QuadricMesh{cube, {}}, o);
+  EXPECT_EQ(r.mesh.face_count(), 12u);
+  EXPECT_EQ(distinct_positions(r.mesh), 8u);
+  for (const Vec3f& p : r.mesh.positions) {
+    for (int a = 0; a < 3; ++a)
+      EXPECT_LE(std::min(std::abs(p[a]), std::abs(p[a] - 1)), 1e-6) << p.transpose();
+  }
+  for (const Triangle& t : r.mesh.triangles) {
+    const Vec3f n = (r.mesh.positions[t[1]] - r.mesh.positions[t[0]])
+                        .cross(r.mesh.positions[t[2]] - r.mesh.positions[t[0]])
+                        .normalized();
+    for (Index v : t) EXPECT_GT(r.mesh.normals[v].dot(n), 0.999f);
+  }
+}
+
 TEST(Seams, TheSameInputGivesTheSameBytesAtAnyThreadCount) {
   const IndexedMesh torus = uv_torus(96, 48);
   DecimateOptions o;

@@ -63,7 +63,8 @@ struct DecimateOptions {
   // to its face, with weight boundary_weight * |edge|^2 (the units of an area-weighted face plane), so
   // borders keep their shape; so do folds (two faces on an edge turned more than 120 degrees back on each
   // other), whose nearly parallel face planes cannot hold a flap in place; and so do the edges of an
-  // attribute seam that welding joined (see weld), on each side. 0 lets borders and seams move freely. The
+  // attribute seam that welding joined (see weld), on each side, but for a hard edge whose sides differ
+  // only by normals within 30 degrees (flat shading). 0 lets borders and seams move freely. The
   // default, 10, gave the lowest Hausdorff distance on the open shared scan (bunny) among 0.3, 1, 3, 10 and
   // 100.
   double boundary_weight = 10.0;
