@@ -1326,6 +1326,7 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
 }
 
 void PlyStream::emit_polygon() {
+  polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size()));
   polygon_triangles(
       polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },
       polygon_scratch_,

@@ -248,6 +248,15 @@ TEST(Obj, PolygonsAreFanTriangulated) {
   const IndexedMesh m =
       read_text(dir, "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 2 0\nv 0 1 0\nf 1 2 3 4 5\nf 1 2 3 4\n");
   EXPECT_EQ(m.triangles, (std::vector<Triangle>{{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 1, 2}, {0, 2, 3}}));
+  // A corner repeating the one before it (a triangle written as a quad, the last corner twice) adds no
+  // triangle without area; a polygon of fewer than three distinct corners keeps them all.
+  const IndexedMesh repeated =
+      read_text(dir,
+                "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 3\nf 1 1 2 3\nf 4 1 2 4\nf 1 2 2 3 3 4\n"
+                "f 1 1 1 1\n");
+  EXPECT_EQ(
+      repeated.triangles,
+      (std::vector<Triangle>{{0, 1, 2}, {0, 1, 2}, {0, 1, 3}, {0, 1, 2}, {0, 2, 3}, {0, 0, 0}, {0, 0, 0}}));
 }
 
 // A concave polygon's fan covers ground outside it: an L's fan from its inner corner's neighbour reached over

@@ -802,6 +802,13 @@ TEST(PlyLayout, PolygonsAreFanTriangulated) {
   const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}, {4, 5, 6}, {4, 6, 7},
                                           {4, 7, 2}, {4, 2, 1}, {7, 6, 5}};
   EXPECT_EQ(read_mesh(dir / "poly.ply").triangles, expected);
+  // A triangle written as a quad with a corner twice is one triangle, not one and a degenerate one.
+  const std::string repeated_header =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n";
+  write_bytes(dir / "repeated.ply", repeated_header + "4 0 1 2 2\n5 3 0 0 1 2\n");
+  EXPECT_EQ(read_mesh(dir / "repeated.ply").triangles,
+            (std::vector<Triangle>{{0, 1, 2}, {3, 0, 1}, {3, 1, 2}}));
 
   // The same in binary, where triangles take the fast path and polygons interrupt it.
   Bytes out;
