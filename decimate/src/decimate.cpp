@@ -457,7 +457,10 @@ struct Decimator {
 
   std::uint64_t faces_alive = 0, verts_alive = 0, boundary_edges = 0;
   bool kept_last_faces = false;  // a collapse was put off as it would have removed every face left
-  float applied_key = 0;         // the largest key (without shape penalty) of the collapses done
+  // The fewest faces below the face target that a pair put off this round would have left (see run).
+  static constexpr std::uint64_t kNoShort = ~std::uint64_t{0};
+  std::uint64_t least_short = kNoShort;
+  float applied_key = 0;  // the largest key (without shape penalty) of the collapses done
   std::uint64_t target_f = 0, target_v = 0;
   std::uint64_t compact_below = 0;  // renumber when this few vertices are left (see compact)
 
@@ -1577,7 +1580,11 @@ struct Decimator {
 
   void run() {
     std::uint64_t collapses_at_retry = ~std::uint64_t{0};
-    bool overshoot = false;
+    // How far below the face target a collapse may land: none, until every other candidate is spent; then
+    // one (a closed manifold's parity), then as few as the pairs left allow (on a non-manifold edge a
+    // collapse removes more than two faces: a surface and its reversed copy, four), so that the count ends
+    // as near the target as it can but never above it.
+    std::uint64_t short_allowed = 0;
     const std::uint64_t expected = expected_collapses();
     std::uint64_t next_report = 0;
     while (!reached()) {
@@ -1599,8 +1606,11 @@ struct Decimator {
           }
           if (!heap.empty()) continue;
         }
-        if (!overshoot && !deferred.empty()) {
-          overshoot = true;
+        // Every candidate left was put off: allow one below, then the least any of them needed (each
+        // round allows more, so this ends).
+        if (!deferred.empty() && (short_allowed == 0 || least_short != kNoShort)) {
+          short_allowed = short_allowed == 0 ? 1 : least_short;
+          least_short = kNoShort;
           for (Index e : deferred) {
             if (edges[e].slot == kDeferred) recost(e);
           }
@@ -1609,7 +1619,7 @@ struct Decimator {
         }
         break;
       }
-      try_top(overshoot);
+      try_top(short_allowed);
     }
     // Done, whether at the target or stopped short of it (an error bound, guards): the bar ends full.
     report(opt.progress, "decimate", stats.collapses, stats.collapses);
@@ -1875,19 +1885,20 @@ struct Decimator {
   // never removed, whatever the targets: an error bound alone (a flat square at --max-error 1, a single
   // triangle at cost 0 without border planes) or a vertex target below 3 took every face, and an empty mesh
   // is no approximation of a surface.
-  bool fits_targets(std::uint64_t kf, std::uint64_t kv, bool overshoot) {
+  bool fits_targets(std::uint64_t kf, std::uint64_t kv, std::uint64_t short_allowed) {
     if (kf >= faces_alive) {
-      kept_last_faces = true;
+      kept_last_faces = true;  // never the last faces: an empty mesh is no approximation of a surface
       return false;
     }
     if (target_f > 0 && faces_alive - kf < target_f) {
       // One below is the best a closed manifold allows when one face is left to remove: every collapse
-      // removes two unless it is on a boundary edge, and none is left. Once every other candidate is spent
-      // (`overshoot`), one below is taken anywhere; never more, which took the last collapse of a mesh whose
-      // remaining pairs each removed many faces (every face, on a fan around one edge) to 0 faces.
-      const bool one_below =
-          faces_alive - kf + 1 == target_f && (overshoot || (kf == 2 && boundary_edges == 0));
-      if (!one_below) return false;
+      // removes two unless it is on a boundary edge, and none is left. Beyond that, what run() allows.
+      const std::uint64_t short_by = target_f - (faces_alive - kf);
+      const bool parity = short_by == 1 && kf == 2 && boundary_edges == 0;
+      if (!parity && short_by > short_allowed) {
+        least_short = std::min(least_short, short_by);
+        return false;
+      }
     }
     return !(target_v > 0 && verts_alive - kv < target_v);
   }
@@ -1909,8 +1920,8 @@ struct Decimator {
   // centre's pair to it, and when every return trip read the whole fan (the full penalty's faces), a disk
   // fanned from one centre to 20,000 rim vertices took 4.5 s at 10 %.
   static constexpr Index kLargeFan = 64;
-  bool refused_beside_small_end(Index a, Index b, const Vec3d& p, bool overshoot, MovedShapes* near,
-                                bool* shapes_checked) {
+  bool refused_beside_small_end(Index a, Index b, const Vec3d& p, std::uint64_t short_allowed,
+                                MovedShapes* near, bool* shapes_checked) {
     const bool a_small = verts[a].live_faces <= verts[b].live_faces;
     const Index small = a_small ? a : b, big = a_small ? b : a;
     // The budget keeps the pairs this does not refuse (where both ends are large, as in a soup of coincident
@@ -1928,7 +1939,7 @@ struct Decimator {
     if (dying.size() > 2) return false;
     const std::uint64_t kf = dying.size(), orphans = orphans_of_dying(a, b);
     const bool pair_orphaned = std::uint64_t{verts[a].live_faces} + verts[b].live_faces == 2 * kf;
-    if (!fits_targets(kf, 1 + orphans + (pair_orphaned ? 1 : 0), overshoot)) return false;
+    if (!fits_targets(kf, 1 + orphans + (pair_orphaned ? 1 : 0), short_allowed)) return false;
     if (opt.preserve_topology && (orphans > 0 || pair_orphaned)) return false;
     *shapes_checked = true;
     auto kept = [&](const Face& face, Index moved) {
@@ -2013,7 +2024,7 @@ struct Decimator {
     return refused;
   }
 
-  void try_top(bool overshoot) {
+  void try_top(std::uint64_t short_allowed) {
     const HeapEntry top = heap.top();
     const Index e = top.edge;
     const Index next = predicted_next();
@@ -2056,7 +2067,7 @@ struct Decimator {
     if (large_fan) {
       MovedShapes near;
       bool shapes_checked = false;
-      if (refused_beside_small_end(a, b, pl.point, overshoot, &near, &shapes_checked)) {
+      if (refused_beside_small_end(a, b, pl.point, short_allowed, &near, &shapes_checked)) {
         ++stats.rejected_flip;
         block(e, kBlockedFlip);
         return;
@@ -2083,7 +2094,7 @@ struct Decimator {
     const std::uint64_t kf = dying.size();
     const std::uint64_t orphans = orphans_of_dying(a, b);
     const bool pair_orphaned = fa.size() + fb.size() == 2 * kf;  // the pair itself loses every face
-    if (!fits_targets(kf, 1 + orphans + (pair_orphaned ? 1 : 0), overshoot)) {
+    if (!fits_targets(kf, 1 + orphans + (pair_orphaned ? 1 : 0), short_allowed)) {
       heap.remove(e, kDeferred);
       deferred.push_back(e);
       return;

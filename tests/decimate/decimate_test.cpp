@@ -278,6 +278,24 @@ TEST(Decimate, CountsNeverFallMoreThanParityAllows) {
   }
 }
 
+TEST(Decimate, AFaceTargetIsNeverPassedWhereEachCollapseRemovesFour) {
+  // A sphere and its reversed copy on the same vertices (the two sides of a sheet): every edge has four
+  // faces, and every collapse removes four. The count stopped above odd targets (52 for 51), reported
+  // blocked; it now lands at most three below, never above.
+  IndexedMesh sheet = test::sphere(3);
+  const std::size_t n = sheet.triangles.size();
+  for (std::size_t f = 0; f < n; ++f) {
+    const Triangle t = sheet.triangles[f];
+    sheet.triangles.push_back({t[0], t[2], t[1]});
+  }
+  for (std::uint64_t target : {51u, 100u, 283u, 301u}) {
+    const DecimateResult r = run(sheet, faces(target));
+    EXPECT_LE(r.mesh.face_count(), target) << r.stats.reason;
+    EXPECT_GE(r.mesh.face_count() + 3, target) << r.stats.reason;
+    EXPECT_TRUE(r.stats.target_reached) << r.stats.reason;
+  }
+}
+
 TEST(Decimate, AnEdgeOfManyFacesCountsTheVerticesItsCollapseLeavesAlone) {
   // A book of 30 pages on a short spine, the first 12 pages twice over (duplicate faces) and one three
   // times: the spine is the cheapest pair, and collapsing it takes every face and leaves every tip without

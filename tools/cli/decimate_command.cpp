@@ -31,11 +31,11 @@ void add_decimate_command(CLI::App& app) {
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
       ->check(file_name())
       ->required();
-  CLI::Option* faces =
-      cmd->add_option(
-             "--faces", o.target_faces,
-             "Stop at exactly N faces (N-1 where every collapse left removes two, as on a closed manifold)")
-          ->transform(whole_number(1));
+  CLI::Option* faces = cmd->add_option("--faces", o.target_faces,
+                                       "Stop at exactly N faces, never more (N-1 where every collapse left "
+                                       "removes two, as on a closed manifold; "
+                                       "fewer where each removes more)")
+                           ->transform(whole_number(1));
   cmd->add_option("--vertices", o.target_vertices,
                   "Stop at exactly N vertices (positions: the copies of one along a texture or normal seam "
                   "count once); with --faces or --ratio too, at whichever target is met first")

@@ -53,10 +53,11 @@ void add_simplify_command(CLI::App& app) {
   cmd->add_option("-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
       ->check(file_name())
       ->required();
-  CLI::Option* faces =
-      cmd->add_option("--faces", o.target_faces,
-                      "Exact face count (N-1 where every collapse left removes two, as on a closed manifold)")
-          ->transform(whole_number(1));
+  CLI::Option* faces = cmd->add_option("--faces", o.target_faces,
+                                       "Exact face count, never more (N-1 where every collapse left removes "
+                                       "two, as on a closed manifold; fewer "
+                                       "where each removes more)")
+                           ->transform(whole_number(1));
   cmd->add_option("--ratio", o.target_ratio, "Fraction of the input's faces, in (0, 1]")
       ->check(fraction())
       ->excludes(faces);

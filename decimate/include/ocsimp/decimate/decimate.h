@@ -39,8 +39,10 @@ struct DecimateOptions {
   // Stopping criteria. A zero count/ratio is unset; max_error is unset when infinite. Any combination may be
   // given and decimation stops at whichever is reached first; at least one must be set.
   //
-  // target_faces: stop at exactly this many faces, or one fewer where every remaining candidate removes two
-  // faces (parity of a closed manifold); never more, unless guards block every collapse first.
+  // target_faces: stop at exactly this many faces, or as few fewer as the remaining candidates allow where
+  // none removes few enough (one fewer on a closed manifold, where each removes two; up to three fewer
+  // where each removes four, as on a surface joined to its reversed copy); never more, unless guards block
+  // every collapse first.
   std::uint64_t target_faces = 0;
   // target_vertices: stop at exactly this many vertices (vertices that no face uses are not counted, and are
   // dropped from the output).
@@ -127,7 +129,7 @@ struct DecimateOptions {
 
 enum class DecimateStop {
   target_reached,  // the face or vertex target was met exactly
-  parity,          // a face target was met one below (no remaining candidate removes a single face)
+  parity,          // a face target was met below (no remaining candidate removed few enough faces)
   max_error,       // every remaining candidate would exceed max_error
   blocked,         // every remaining candidate is rejected by a guard (see DecimateStats::reason)
   exhausted,       // a count target was not met and no candidate pair is left at all
@@ -163,8 +165,8 @@ struct DecimateStats {
   // grid's border 0.015 off). Without borders it is the area-weighted RMS distance from p to the planes of
   // that surface, so an LOD pipeline can use it as a switching distance. error_distance() below converts.
   double max_error = 0;
-  // A count target was met (exactly, or one below for parity); with max_error alone, always true (decimation
-  // went as far as the bound allows).
+  // A count target was met (exactly, or below as DecimateStop::parity says); with max_error alone, always
+  // true (decimation went as far as the bound allows).
   bool target_reached = false;
   DecimateStop stop = DecimateStop::exhausted;
   std::string reason;  // one line: why decimation stopped, with the counts reached
