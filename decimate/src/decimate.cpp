@@ -828,7 +828,9 @@ struct Decimator {
           for (std::size_t k = i + 1; k < j; ++k) faces[sides[k].f].e[sides[k].slot] = id;
           if (j - i == 1) {
             found.emplace_back(id, sides[i].f);
-          } else if (j - i == 2 && is_fold(sides[i].f, sides[i + 1].f)) {
+          } else if (j - i == 2 && is_fold(sides[i].f, sides[i + 1].f,
+                                           faces[sides[i].f].v[sides[i].slot] ==
+                                               faces[sides[i + 1].f].v[sides[i + 1].slot])) {
             folds.emplace_back(id, sides[i].f);
             folds.emplace_back(id, sides[i + 1].f);
           } else if (storage.seams && (storage.welded_at[v] || storage.welded_at[sides[i].w]) &&
@@ -881,11 +883,19 @@ struct Decimator {
   }
 
   // Two faces turned back on each other by more than 120 degrees, judged by their encoded input normals
-  // (already computed, and the 1e-4 precision of the encoding does not matter for this threshold).
-  bool is_fold(Index f0, Index f1) const {
+  // (already computed, and the 1e-4 precision of the encoding does not matter for this threshold). Faces
+  // that run along their edge the same way (`same_way`: the mesh's orientation flips there) are compared
+  // with one turned over: a sphere with every other face reversed read as folded along every edge, and
+  // their planes pinned it (16 % Hausdorff at 10 % of its faces, against 1.1 % consistently oriented).
+  bool is_fold(Index f0, Index f1, bool same_way) const {
     const Face& a = faces[f0];
     const Face& b = faces[f1];
     if (a.ref[0] == kNoNormal || b.ref[0] == kNoNormal) return false;
+    if (same_way) {
+      const Vec3d n0 = decode_normal(a.ref), n1 = decode_normal(b.ref);
+      const double dot = -n0.dot(n1);
+      return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
+    }
     // Decoded, each component has the sign of its code (x and y; z: whether |x| + |y| is within 32767, see
     // decode_normal). Two normals in the same octant have no negative product, so no negative dot product:
     // most neighbouring faces, told apart without decoding. The signs of x and y compare as sign bits (an XOR
