@@ -163,8 +163,9 @@ struct alignas(64) Vertex {
   Index live_faces;               // 0: removed (or never used)
   std::uint32_t stamp, mark;      // scratch for neighbourhood maps
   Index seg_cap;                  // room in this vertex's own segment (its input valence)
-  // The weight of q's surface planes alone (see QuadricMesh::areas): costs are distances over it, so the
-  // border planes' weight (boundary_weight) makes a border firmer without loosening max_error along it.
+  // The weight of q's surface planes alone (see QuadricMesh::areas), in units of Decimator::area_unit:
+  // costs are distances over it, so the border planes' weight (boundary_weight) makes a border firmer
+  // without loosening max_error along it.
   float area;
   Quadric q;  // relative to the local origin
 };
@@ -427,6 +428,9 @@ struct Decimator {
 
   Vec3d origin = Vec3d::Zero();
   double key_scale = 1;  // keys are length^3 (see key_of): divided by diagonal^3 they fit float's range
+  // Vertex::area is in units of diagonal^2, for the same reason: as a plain float, a mesh 1e20 across
+  // overflowed it (every error distance 0, --max-error ignored) and one 1e-25 across underflowed it.
+  double area_unit = 1;
   Vec3d box_low = Vec3d::Zero();
   double box_extent = 0;  // the bounding box's longest side
 
@@ -708,6 +712,7 @@ struct Decimator {
     box_extent = box.extent().maxCoeff();
     const double diagonal = box.diagonal();
     key_scale = diagonal > 0 ? 1.0 / (diagonal * diagonal * diagonal) : 1.0;
+    area_unit = diagonal > 0 ? diagonal * diagonal : 1.0;
 
     build_edges();
     // The pairs first: the border planes leave out the cracks they will close.
@@ -1000,7 +1005,7 @@ struct Decimator {
           q.b2 += q.a02 * o.x() + q.a12 * o.y() + q.a22 * o.z();
           q.c = c;
           verts[v].q = q;
-          verts[v].area = static_cast<float>(surface_area(in, v));
+          verts[v].area = static_cast<float>(surface_area(in, v) / area_unit);
         }
       });
       std::vector<Quadric>().swap(carried);
@@ -1008,7 +1013,8 @@ struct Decimator {
     } else {
       face_quadrics(positions);
       parallel_chunks(nv, 16384, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t v = begin; v < end; ++v) verts[v].area = static_cast<float>(verts[v].q.trace());
+        for (std::size_t v = begin; v < end; ++v)
+          verts[v].area = static_cast<float>(verts[v].q.trace() / area_unit);
       });
     }
     std::sort(boundary_list.begin(), boundary_list.end());
@@ -1285,7 +1291,7 @@ struct Decimator {
     }
     const double weight = trace(*q);
     if (opt.max_error < std::numeric_limits<double>::infinity() &&
-        error_distance(p->error, double(va.area) + vb.area) > opt.max_error)
+        error_distance(p->error, (double(va.area) + vb.area) * area_unit) > opt.max_error)
       return kIdleError;
     double cost = p->error;
     if (opt.attribute_weight > 0) {
@@ -2179,7 +2185,8 @@ struct Decimator {
     Vertex& vk = vtx[k];
     Vertex& vr = vtx[r];
 
-    stats.max_error = std::max(stats.max_error, error_distance(pl.error, double(vk.area) + vr.area));
+    stats.max_error =
+        std::max(stats.max_error, error_distance(pl.error, (double(vk.area) + vr.area) * area_unit));
     interpolate_attributes(a, b, k, pl.point);
     const Vec3f placed = nearest_float(origin + pl.point);
     for (int a = 0; a < 3; ++a) vk.p[a] = placed[a];
@@ -2630,6 +2637,7 @@ struct Decimator {
       auto w = std::make_unique<Decimator>(opt, storage);
       w->origin = origin;
       w->key_scale = key_scale;
+      w->area_unit = area_unit;
       w->region_of = ids.data();
       w->region = static_cast<std::uint32_t>(r);
       w->faces_alive = faces0;
@@ -2951,7 +2959,7 @@ struct Decimator {
       if (!uvs.empty()) out.uvs.push_back(uvs[v]);
       if (quadrics) {
         quadrics->push_back(absolute(verts[v].q));
-        areas->push_back(verts[v].area);
+        areas->push_back(double(verts[v].area) * area_unit);
       }
     }
     out.triangles.reserve(faces_alive);

@@ -427,6 +427,31 @@ TEST(Decimate, ASphereSpanningNearlyTheFloatRangeStaysFinite) {
   for (const Vec3f& p : r.mesh.positions) EXPECT_TRUE(p.allFinite());
 }
 
+// Errors are distances, whatever the scale: the area behind each one was a plain float, which overflowed for
+// a mesh 1e20 across (every error 0: --max-error 0 took the sphere to a tetrahedron, and an LOD chain's
+// next level refused the infinite areas) and underflowed for one 1e-25 across.
+TEST(Decimate, ErrorsScaleWithTheMesh) {
+  const IndexedMesh unit = test::sphere(3);
+  DecimateOptions o = faces(100);
+  o.output_quadrics = true;
+  const DecimateResult reference = run(unit, o);
+  ASSERT_GT(reference.stats.max_error, 0);
+  for (float scale : {1e20f, 1e-25f}) {
+    IndexedMesh sphere = unit;
+    for (Vec3f& p : sphere.positions) p *= scale;
+    const DecimateResult r = run(sphere, o);
+    EXPECT_NEAR(r.stats.max_error / scale, reference.stats.max_error, 0.01 * reference.stats.max_error)
+        << scale;
+    ASSERT_EQ(r.areas.size(), r.mesh.vertex_count());
+    for (std::size_t v = 0; v < r.areas.size(); ++v)
+      EXPECT_NEAR(r.areas[v] / (double(scale) * scale), reference.areas[v], 1e-5 * reference.areas[v])
+          << scale;
+    DecimateOptions none;
+    none.max_error = 0.1 * reference.stats.max_error * scale;
+    EXPECT_GT(run(sphere, none).mesh.face_count(), 100u) << scale;
+  }
+}
+
 TEST(Decimate, ExactCountsOnOpenMesh) {
   const IndexedMesh bumpy =
       height_field(30, [](double x, double y) { return 0.1 * std::sin(6 * x) * std::cos(5 * y); });
