@@ -369,15 +369,14 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // none for a target of 800, its finest grid short of its target, and the decimator could not then reach
   // its own. (An octree that met its target, the largest count it reaches not above it, did its part.) The
   // target comes first, as for a limit too small for any intermediate: the input is read again, whole, and
-  // decimated in core over the limit, when the process can have that memory (with its vertices on disk, the
-  // input is too large).
+  // decimated in core over the limit, when the process can have that memory (also when the limit had sent
+  // its vertices to disk: a 4,000-face strip under a 1 KiB limit was written with no face at all).
   const std::uint64_t clustered_faces = stage.mesh.mesh.face_count();
   const std::uint64_t final_target = count_target(options, stage.cluster.input_triangles);
   const double whole_peak =
       process_bytes + vertex_bytes + kInCoreBytesPerFace * static_cast<double>(stage.cluster.input_triangles);
   if (!stage.cluster.target_met && final_target > 0 && clustered_faces < final_target &&
-      stage.cluster.input_triangles > final_target && !stage.out_of_core &&
-      whole_peak <= static_cast<double>(memory_room())) {
+      stage.cluster.input_triangles > final_target && whole_peak <= static_cast<double>(memory_room())) {
     const bool over = whole_peak > budget;
     stage.memory_needed = over ? static_cast<std::uint64_t>(whole_peak) : 0;
     if (options.warn) {
@@ -390,7 +389,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     }
     stage.mesh = {};
     stage.cluster = {};
-    read.warn = {};  // what the first read had to say is said
+    read.warn = {};          // what the first read had to say is said
+    read.memory_budget = 0;  // in core, over the limit, as the warning says
+    stage.out_of_core = false;
     stream = open_triangle_stream(input_path, read);
     read_all();
     return stage;
