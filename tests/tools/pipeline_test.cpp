@@ -482,6 +482,18 @@ TEST(Pipeline, AClusteringThatLosesTheFacesGivesWayToDecimatingInCore) {
     EXPECT_GE(box.lo.y(), -1e-4f);
     EXPECT_LE(box.hi.y(), 0.0101f);
   }
+  // With an error bound alone, too: there is no count to fall short of, but the output had no face.
+  SimplifyOptions bound;
+  bound.max_error = 0.01;
+  bound.memory_limit = 1024;
+  std::vector<std::string> warnings;
+  bound.warn = [&](const std::string& w) { warnings.push_back(w); };
+  const SimplifyResult result = simplify(path, bound);
+  EXPECT_GT(result.mesh.face_count(), 0u);
+  EXPECT_LE(result.max_error(), bound.max_error);
+  EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("clustering kept 0 faces") != std::string::npos;
+  }));
 }
 
 TEST(Pipeline, MaxErrorCountsTheClusteringStage) {

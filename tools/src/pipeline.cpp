@@ -375,17 +375,22 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const std::uint64_t final_target = count_target(options, stage.cluster.input_triangles);
   const double whole_peak =
       process_bytes + vertex_bytes + kInCoreBytesPerFace * static_cast<double>(stage.cluster.input_triangles);
-  if (!stage.cluster.target_met && final_target > 0 && clustered_faces < final_target &&
-      stage.cluster.input_triangles > final_target && whole_peak <= static_cast<double>(memory_room())) {
+  // With an error bound alone there is no count to fall short of, but a clustering that kept no face at all
+  // still gave an empty output.
+  const bool short_of_count = !stage.cluster.target_met && final_target > 0 &&
+                              clustered_faces < final_target && stage.cluster.input_triangles > final_target;
+  const bool lost_everything = final_target == 0 && clustered_faces == 0;
+  if ((short_of_count || lost_everything) && whole_peak <= static_cast<double>(memory_room())) {
     const bool over = whole_peak > budget;
     stage.memory_needed = over ? static_cast<std::uint64_t>(whole_peak) : 0;
     if (options.warn) {
-      options.warn("clustering kept " + std::to_string(clustered_faces) + " faces, under the target of " +
-                   std::to_string(final_target) +
-                   " (a face whose corners share a cell collapses, and thin or small parts lose all theirs): "
-                   "reading the input again to decimate it in core, which is expected to take about " +
-                   format_bytes(static_cast<std::uint64_t>(whole_peak)) +
-                   (over ? ", over the memory limit of " + format_bytes(stage.memory_limit) : std::string()));
+      options.warn(
+          "clustering kept " + std::to_string(clustered_faces) + " faces" +
+          (lost_everything ? std::string() : ", under the target of " + std::to_string(final_target)) +
+          " (a face whose corners share a cell collapses, and thin or small parts lose all theirs): "
+          "reading the input again to decimate it in core, which is expected to take about " +
+          format_bytes(static_cast<std::uint64_t>(whole_peak)) +
+          (over ? ", over the memory limit of " + format_bytes(stage.memory_limit) : std::string()));
     }
     stage.mesh = {};
     stage.cluster = {};
