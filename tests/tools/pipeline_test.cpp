@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <limits>
 #include <string_view>
 #include <tuple>
@@ -116,6 +117,41 @@ TEST(Pipeline, AnIntermediateBeyondTheInputKeepsTheWholeInput) {
     options.intermediate = bad;
     EXPECT_THROW(simplify(path, options), Error) << bad;
   }
+}
+
+// A file's face count is of polygons: 2,400 quads capped an --intermediate of 4,500 (1.5 times a target of
+// 3,000) at 2,400 faces, under the target. The quads and their triangulation now give the same output.
+TEST(Pipeline, AnIntermediateCountsTrianglesNotPolygons) {
+  test::TempDir dir;
+  const int n = 60, m = 40;
+  std::string obj;
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < m; ++j) {
+      const double a = 2 * M_PI * i / n, b = 2 * M_PI * j / m;
+      char line[96];
+      std::snprintf(line, sizeof line, "v %.9f %.9f %.9f\n", (1 + 0.4 * std::cos(b)) * std::cos(a),
+                    (1 + 0.4 * std::cos(b)) * std::sin(a), 0.4 * std::sin(b));
+      obj += line;
+    }
+  }
+  auto id = [&](int i, int j) { return std::to_string((i % n) * m + (j % m) + 1); };
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < m; ++j)
+      obj += "f " + id(i, j) + " " + id(i + 1, j) + " " + id(i + 1, j + 1) + " " + id(i, j + 1) + "\n";
+  }
+  std::ofstream(dir / "quads.obj") << obj;
+  write_mesh(dir / "triangles.ply", read_mesh(dir / "quads.obj"));
+  SimplifyOptions options;
+  options.target_faces = 3000;
+  options.two_stage = true;
+  options.intermediate = 1.5;
+  const SimplifyResult quads = simplify(dir / "quads.obj", options);
+  const SimplifyResult triangles = simplify(dir / "triangles.ply", options);
+  EXPECT_EQ(quads.intermediate_faces, triangles.intermediate_faces);
+  EXPECT_GT(quads.intermediate_faces, 3000u);
+  EXPECT_EQ(quads.mesh.face_count(), 3000u) << quads.decimate.reason;
+  EXPECT_EQ(quads.mesh.triangles, triangles.mesh.triangles);
+  EXPECT_EQ(quads.mesh.positions, triangles.mesh.positions);
 }
 
 TEST(Pipeline, AnIntermediateBelowTheTargetIsReportedShort) {

@@ -53,6 +53,9 @@ constexpr double kMaxIntermediate = 8.0;
 // (a 40 k-face scan to 2,000 faces under a 256 KiB limit, with the intermediate at the target, ended at
 // 1,999).
 constexpr double kMinMultiple = 1.25;
+// What an intermediate may ask of an input of a given face count, where the count is a hint of polygons: up
+// to six corners each, four triangles.
+constexpr double kTrianglesPerPolygon = 4.0;
 // However small the target, an intermediate the decimator takes in a fraction of a second (about 0.2 s for
 // 2^18 faces) is not worth making coarser: clustering to a few hundred faces loses what decimation keeps.
 // Measured with --two-stage through 8x the target: fandisk to 129 faces, RMS 2.2x pure decimation's (its
@@ -233,7 +236,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
     if (options.intermediate == 0) faces = std::max(faces, std::min(kMinIntermediate, room));
     // Never more than the input (a multiple of 1e30 asks for all of it): the cast of a larger double
     // overflowed, and the octree was then asked for its minimum of 4 faces.
-    intermediate_faces = static_cast<std::uint64_t>(std::min(faces, static_cast<double>(faces_hint)));
+    intermediate_faces =
+        static_cast<std::uint64_t>(std::min(faces, kTrianglesPerPolygon * static_cast<double>(faces_hint)));
   } else {
     // An error bound alone: as large as the budget allows, which leaves the clustering stage the least
     // error. --two-stage asks for the stage where the input fits, which that size would leave out; it gets
@@ -249,7 +253,9 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   // intermediate of the whole mesh, the carried quadrics alone moved the final RMS by 0.83-1.24x of pure
   // decimation's (the greedy order at a few dozen faces turns on ties).
   const bool whole_input = options.intermediate == 0 && intermediate_faces >= faces_hint;
-  intermediate_faces = std::min(intermediate_faces, faces_hint);
+  // An intermediate asked for may exceed the hint, which counts polygons, not their triangles: 2,400 quads
+  // (4,800 triangles) capped an --intermediate of 4,500 at 2,400, under the target of 3,000.
+  if (options.intermediate == 0) intermediate_faces = std::min(intermediate_faces, faces_hint);
   const std::uint64_t cluster_target_faces = std::max<std::uint64_t>(intermediate_faces, 4);
   // Fewer fine cells a vertex where the budget has no room for the full count, down to the minimum.
   const double fine_cells = fine_cells_for(static_cast<double>(cluster_target_faces), fine_per_vertex,
