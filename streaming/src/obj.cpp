@@ -457,7 +457,8 @@ class ObjStream final : public TriangleStream {
     if (corners_.size() == 3) return emit(Triangle{corners_[0].v, corners_[1].v, corners_[2].v});
     polygon_.clear();
     for (const Corner& c : corners_) polygon_.push_back(c.v);
-    polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size()));
+    polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size(),
+                                          [&](Index a, Index b) { return same_point(a, b); }));
     if (!positions_known()) return fan_triangles(polygon_.data(), polygon_.size(), emit);
     polygon_triangles(
         polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },

@@ -1326,7 +1326,8 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
 }
 
 void PlyStream::emit_polygon() {
-  polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size()));
+  polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size(),
+                                        [&](Index a, Index b) { return same_point(a, b); }));
   polygon_triangles(
       polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },
       polygon_scratch_,

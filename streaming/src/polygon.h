@@ -26,21 +26,21 @@ struct PolygonScratch {
   std::vector<unsigned char> reflex;
 };
 
-// Drops the corners of polygon `corners` that repeat the one before them (the first counting as the last
-// one's next), as exporters write a triangle as a quad with a corner twice: each would add a triangle
-// without area. Returns the corners left; a polygon that would keep fewer than three is left whole (it has
-// no area anyway, and its triangles say so downstream).
-template <class Corner>
-std::size_t drop_repeated_corners(Corner* corners, std::size_t n) {
+// Drops the corners of polygon `corners` that repeat the one before it (the first counting as the last
+// one's next; `same(a, b)` says whether two corners are one point), as exporters write a triangle as a quad
+// with a corner twice: each would add a triangle without area. Returns the corners left; a polygon that
+// would keep fewer than three is left whole (it has no area anyway, and its triangles say so downstream).
+template <class Corner, class Same>
+std::size_t drop_repeated_corners(Corner* corners, std::size_t n, const Same& same) {
   std::size_t kept = 0;
-  for (std::size_t i = 0; i < n; ++i) kept += corners[i] != corners[i == 0 ? n - 1 : i - 1];
+  for (std::size_t i = 0; i < n; ++i) kept += !same(corners[i], corners[i == 0 ? n - 1 : i - 1]);
   if (kept < 3 || kept == n) return n;
   // In place: corner i is read before anything is written at i or beyond.
   Corner previous = corners[n - 1];
   std::size_t at = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const Corner corner = corners[i];
-    if (corner != previous) corners[at++] = corner;
+    if (!same(corner, previous)) corners[at++] = corner;
     previous = corner;
   }
   return kept;

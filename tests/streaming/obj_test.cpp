@@ -257,6 +257,14 @@ TEST(Obj, PolygonsAreFanTriangulated) {
   EXPECT_EQ(
       repeated.triangles,
       (std::vector<Triangle>{{0, 1, 2}, {0, 1, 2}, {0, 1, 3}, {0, 1, 2}, {0, 2, 3}, {0, 0, 0}, {0, 0, 0}}));
+  // Also where the repeat names another texture coordinate, as the commands that decimate read it (one
+  // vertex per uv): the copies are one point.
+  test::write_file_bytes(dir / "uv.obj",
+                         "v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt .9 .9\n"
+                         "f 1/1 2/2 3/3 3/4\n");
+  ReadOptions split;
+  split.split_corner_attributes = true;
+  EXPECT_EQ(read_mesh(dir / "uv.obj", split).triangles.size(), 1u);
 }
 
 // A concave polygon's fan covers ground outside it: an L's fan from its inner corner's neighbour reached over

@@ -88,6 +88,11 @@ class TriangleStream {
   // vertex array holds positions (a reader handing its vertices to a sink keeps none, and fans).
   bool positions_known() const { return position_source_ || !vertices().positions.empty(); }
   Vec3f position(Index v) const { return position_source_ ? position_source_(v) : vertices().positions[v]; }
+  // Whether two vertices are one point: the same index, or, where positions are at hand, the same position
+  // (the copies a uv seam splits a vertex into).
+  bool same_point(Index a, Index b) const {
+    return a == b || (positions_known() && position(a) == position(b));
+  }
 
  private:
   std::function<Vec3f(Index)> position_source_;
