@@ -896,20 +896,15 @@ struct Decimator {
     const Face& a = faces[f0];
     const Face& b = faces[f1];
     if (a.ref[0] == kNoNormal || b.ref[0] == kNoNormal) return false;
-    if (same_way) {
-      const Vec3d n0 = decode_normal(a.ref), n1 = decode_normal(b.ref);
-      const double dot = -n0.dot(n1);
-      return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
-    }
     // Decoded, each component has the sign of its code (x and y; z: whether |x| + |y| is within 32767, see
     // decode_normal). Two normals in the same octant have no negative product, so no negative dot product:
     // most neighbouring faces, told apart without decoding. The signs of x and y compare as sign bits (an XOR
     // is negative where they differ), about half the instructions of building both octants' codes.
     const int xa = a.ref[0], ya = a.ref[1], xb = b.ref[0], yb = b.ref[1];
     const bool lower_a = std::abs(xa) + std::abs(ya) > 32767, lower_b = std::abs(xb) + std::abs(yb) > 32767;
-    if (((xa ^ xb) | (ya ^ yb)) >= 0 && lower_a == lower_b) return false;
+    if (!same_way && ((xa ^ xb) | (ya ^ yb)) >= 0 && lower_a == lower_b) return false;
     const Vec3d n0 = decode_normal(a.ref), n1 = decode_normal(b.ref);
-    const double dot = n0.dot(n1);
+    const double dot = same_way ? -n0.dot(n1) : n0.dot(n1);
     return dot < 0 && dot * dot > kFoldCos * kFoldCos * n0.squaredNorm() * n1.squaredNorm();
   }
 
