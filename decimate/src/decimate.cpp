@@ -763,8 +763,10 @@ struct Decimator {
       if (!source.uvs.empty() && source.uvs[a] != source.uvs[b]) return true;
       if (!source.colors.empty() && source.colors[a] != source.colors[b]) return true;
       if (source.normals.empty()) return true;
+      // (A zero normal has no direction to be near: either one makes a seam.)
       const Vec3d na = source.normals[a].cast<double>(), nb = source.normals[b].cast<double>();
-      return !(na.dot(nb) >= kSoftNormalSeamCos * na.norm() * nb.norm() && na.squaredNorm() > 0);
+      const double la = na.norm(), lb = nb.norm();
+      return !(la > 0 && lb > 0 && na.dot(nb) >= kSoftNormalSeamCos * la * lb);
     };
     const auto [first_v, first_w] = ends(sides[0]);
     for (std::size_t k = 1; k < n; ++k) {
@@ -1898,7 +1900,7 @@ struct Decimator {
   // is no approximation of a surface.
   bool fits_targets(std::uint64_t kf, std::uint64_t kv, std::uint64_t short_allowed) {
     if (kf >= faces_alive) {
-      kept_last_faces = true;  // never the last faces: an empty mesh is no approximation of a surface
+      kept_last_faces = true;
       return false;
     }
     if (target_f > 0 && faces_alive - kf < target_f) {
