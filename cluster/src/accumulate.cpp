@@ -117,34 +117,37 @@ void unpack(const Vec3f& slot, std::uint32_t& cell, std::uint64_t& q) {
   std::memcpy(&q, bytes + 4, 8);
 }
 
-// unpack() for the face pass, which also sets kReferenced in the slot and returns the quanta without it.
-// Threads may mark the same vertex at once: the slot's last word goes through relaxed atomics (the other two
-// are only read here), and every writer stores the same value, so no mark is lost. It is stored only when
-// missing, as a vertex is a corner of about six triangles and each store dirties a cache line.
-void unpack_marking(Vec3f& slot, std::uint32_t& cell, std::uint64_t& q) {
-  using Word = std::uint32_t __attribute__((may_alias));
-  char* bytes = reinterpret_cast<char*>(slot.data());
-  std::uint32_t low;
+// Bit 63 of the quanta, as it sits in the slot's last word.
+constexpr std::uint32_t kMark = static_cast<std::uint32_t>(kReferenced >> 32);
+using SlotWord = std::uint32_t __attribute__((may_alias));
+
+// unpack() while the face pass may be marking slots: the slot's last word (the quanta's high half, with
+// kMark) goes through a relaxed atomic, the other two are only read. Returns that word; `low` is the rest.
+std::uint32_t unpack_shared(const Vec3f& slot, std::uint32_t& cell, std::uint32_t& low) {
+  const char* bytes = reinterpret_cast<const char*>(slot.data());
   std::memcpy(&cell, bytes, 4);
   std::memcpy(&low, bytes + 4, 4);
-  Word* high_word = reinterpret_cast<Word*>(bytes + 8);
-  constexpr std::uint32_t kMark = static_cast<std::uint32_t>(kReferenced >> 32);
-  const std::uint32_t high = __atomic_load_n(high_word, __ATOMIC_RELAXED);
+  return __atomic_load_n(reinterpret_cast<const SlotWord*>(bytes + 8), __ATOMIC_RELAXED);
+}
+
+// unpack() for the face pass, which also sets kReferenced in the slot and returns the quanta without it.
+// Threads may mark the same vertex at once, and every writer stores the same value, so no mark is lost. It
+// is stored only when missing, as a vertex is a corner of about six triangles and each store dirties a
+// cache line.
+void unpack_marking(Vec3f& slot, std::uint32_t& cell, std::uint64_t& q) {
+  std::uint32_t low;
+  const std::uint32_t high = unpack_shared(slot, cell, low);
   if (!(high & kMark)) [[unlikely]]
-    __atomic_store_n(high_word, high | kMark, __ATOMIC_RELAXED);
+    __atomic_store_n(reinterpret_cast<SlotWord*>(reinterpret_cast<char*>(slot.data()) + 8), high | kMark,
+                     __ATOMIC_RELAXED);
   q = low | static_cast<std::uint64_t>(high & ~kMark) << 32;
 }
 
-// A packed vertex's position, from its cell and quanta. The face pass may be marking the slot meanwhile
-// (unpack_marking): its last word is read through a relaxed atomic, and the mark masked off.
+// A packed vertex's position, from its cell and quanta, while the face pass may be marking it.
 Vec3f packed_position(const Vec3f& slot, const std::vector<CellKey>& keys, const Grid& grid) {
-  using Word = std::uint32_t __attribute__((may_alias));
-  const char* bytes = reinterpret_cast<const char*>(slot.data());
   std::uint32_t cell, low;
-  std::memcpy(&cell, bytes, 4);
-  std::memcpy(&low, bytes + 4, 4);
-  const std::uint32_t high = __atomic_load_n(reinterpret_cast<const Word*>(bytes + 8), __ATOMIC_RELAXED);
-  const std::uint64_t q = (low | static_cast<std::uint64_t>(high) << 32) & ~kReferenced;
+  const std::uint32_t high = unpack_shared(slot, cell, low);
+  const std::uint64_t q = low | static_cast<std::uint64_t>(high & ~kMark) << 32;
   return (grid.cell_origin(keys[cell]) + dequantize(q) * grid.cell).cast<float>();
 }
 
