@@ -394,13 +394,13 @@ std::uint64_t restore_attributes(const SeamSource& source, const std::vector<Ind
   std::vector<double> split_areas(areas ? total : 0);
   for (std::size_t v = 0; v < nv; ++v) {
     const std::size_t count = sides[v + 1] - sides[v];
+    const double share = 1.0 / static_cast<double>(count);  // 1 for a vertex of one side: exact
     for (std::size_t k = 0; k < count; ++k) {
       const std::size_t to = sides[v] + k;
       split.positions[to] = out.positions[v];
-      const double share = 1.0 / static_cast<double>(count);
       if (quadrics) {
         split_quadrics[to] = (*quadrics)[v];
-        if (count > 1) split_quadrics[to] *= share;
+        split_quadrics[to] *= share;
       }
       if (areas) split_areas[to] = (*areas)[v] * share;
     }
