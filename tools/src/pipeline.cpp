@@ -234,8 +234,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
             : std::clamp(std::floor(room / static_cast<double>(target)), kMinMultiple, kMaxIntermediate);
     double faces = multiple * static_cast<double>(target);
     if (options.intermediate == 0) faces = std::max(faces, std::min(kMinIntermediate, room));
-    // Never more than the input (a multiple of 1e30 asks for all of it): the cast of a larger double
-    // overflowed, and the octree was then asked for its minimum of 4 faces.
+    // Never more than the input's triangles can be (a multiple of 1e30 asks for all of them): the cast of a
+    // larger double overflowed, and the octree was then asked for its minimum of 4 faces.
     intermediate_faces =
         static_cast<std::uint64_t>(std::min(faces, kTrianglesPerPolygon * static_cast<double>(faces_hint)));
   } else {
