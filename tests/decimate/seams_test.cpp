@@ -287,20 +287,18 @@ TEST(Seams, SplitVerticesShareOutTheirQuadric) {
   EXPECT_GT(next.stats.seam_copies, 0u);
 }
 
+// The unit normal of face t of `mesh`.
+Vec3f unit_normal(const IndexedMesh& mesh, const Triangle& t) {
+  return (mesh.positions[t[1]] - mesh.positions[t[0]])
+      .cross(mesh.positions[t[2]] - mesh.positions[t[0]])
+      .normalized();
+}
+
 // Every face its own three vertices with the face's normal: flat shading, as exporters write it.
 IndexedMesh flat_shaded(const IndexedMesh& mesh) {
-  IndexedMesh flat;
-  for (const Triangle& t : mesh.triangles) {
-    const Vec3f n = (mesh.positions[t[1]] - mesh.positions[t[0]])
-                        .cross(mesh.positions[t[2]] - mesh.positions[t[0]])
-                        .normalized();
-    const Index first = static_cast<Index>(flat.positions.size());
-    for (Index v : t) {
-      flat.positions.push_back(mesh.positions[v]);
-      flat.normals.push_back(n);
-    }
-    flat.triangles.push_back({first, first + 1, first + 2});
-  }
+  IndexedMesh flat = test::triangle_soup(mesh);
+  flat.normals.clear();
+  for (const Triangle& t : mesh.triangles) flat.normals.insert(flat.normals.end(), 3, unit_normal(mesh, t));
   return flat;
 }
 
@@ -326,10 +324,7 @@ TEST(Seams, FlatShadingIsNotACrease) {
   // The output is flat-shaded still: every corner's normal is near its own face's.
   ASSERT_EQ(flat.mesh.normals.size(), flat.mesh.vertex_count());
   for (const Triangle& t : flat.mesh.triangles) {
-    const Vec3f n = (flat.mesh.positions[t[1]] - flat.mesh.positions[t[0]])
-                        .cross(flat.mesh.positions[t[2]] - flat.mesh.positions[t[0]])
-                        .normalized();
-    for (Index v : t) EXPECT_GT(flat.mesh.normals[v].dot(n), std::cos(0.25 * kPi));
+    for (Index v : t) EXPECT_GT(flat.mesh.normals[v].dot(unit_normal(flat.mesh, t)), std::cos(0.25 * kPi));
   }
 
   const IndexedMesh cube = flat_shaded(test::cube(6));
@@ -342,10 +337,7 @@ TEST(Seams, FlatShadingIsNotACrease) {
       EXPECT_LE(std::min(std::abs(p[a]), std::abs(p[a] - 1)), 1e-6) << p.transpose();
   }
   for (const Triangle& t : r.mesh.triangles) {
-    const Vec3f n = (r.mesh.positions[t[1]] - r.mesh.positions[t[0]])
-                        .cross(r.mesh.positions[t[2]] - r.mesh.positions[t[0]])
-                        .normalized();
-    for (Index v : t) EXPECT_GT(r.mesh.normals[v].dot(n), 0.999f);
+    for (Index v : t) EXPECT_GT(r.mesh.normals[v].dot(unit_normal(r.mesh, t)), 0.999f);
   }
 }
 
