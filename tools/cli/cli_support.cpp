@@ -407,10 +407,13 @@ void check_report_destination(const std::string& report, const std::vector<std::
 
 void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_per_face,
                            const std::string& holding, const std::string& instead) {
-  std::uint64_t faces = 0;
-  for (const std::string& path : paths) {
+  std::uint64_t faces = 0, most = 0;
+  std::size_t largest = 0;  // the file named: the one that claims the most faces
+  for (std::size_t i = 0; i < paths.size(); ++i) {
     try {
-      if (detect_format(path) == FileFormat::ply) faces += triangles_hint(path);
+      const std::uint64_t claimed = detect_format(paths[i]) == FileFormat::ply ? triangles_hint(paths[i]) : 0;
+      faces += claimed;
+      if (claimed > most) most = claimed, largest = i;
     } catch (const Error&) {
       // The reader reports it.
     }
@@ -418,10 +421,12 @@ void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_p
   const std::uint64_t memory = physical_memory_bytes();
   const double needed = bytes_per_face * static_cast<double>(faces);
   if (memory == 0 || needed <= static_cast<double>(memory)) return;
-  throw Error(paths.front(), {},
+  const std::string counted =
+      std::to_string(faces) + (most == faces ? " faces" : " faces in all, " + std::to_string(most) + " here");
+  throw Error(paths[largest], {},
               holding + " in memory: about " + format_bytes(static_cast<std::uint64_t>(needed)) + " for " +
-                  std::to_string(faces) + " faces, more than the " + format_bytes(memory) +
-                  " this process can have" + (instead.empty() ? "" : "; " + instead));
+                  counted + ", more than the " + format_bytes(memory) + " this process can have" +
+                  (instead.empty() ? "" : "; " + instead));
 }
 
 std::string json_text(const nlohmann::json& value) {
