@@ -369,6 +369,21 @@ TEST(MeasureDistance, ShiftedPlaneIsItsShiftAway) {
   EXPECT_NEAR(d.percent(d.hausdorff), 100 * shift / std::sqrt(2.0), 1e-6);
 }
 
+// The percentages are of the surface's diagonal: a vertex no face uses, far out, is not part of it (it made
+// the diagonal 173 instead of 1.41 and every percentage 120 times smaller).
+TEST(MeasureDistance, AStrayVertexDoesNotChangeTheDiagonal) {
+  const float shift = 0.05f;
+  IndexedMesh plane = test::grid_square(8);
+  plane.positions.push_back({100, 100, 100});
+  const IndexedMesh lifted = translated(test::grid_square(3), {0, 0, shift});
+  CompareOptions options;
+  options.samples = 10000;
+  const SurfaceDistance d = measure_distance(plane, lifted, options);
+  EXPECT_NEAR(d.hausdorff, shift, 1e-9);
+  EXPECT_NEAR(d.diagonal, std::sqrt(2.0), 1e-7);
+  EXPECT_NEAR(d.percent(d.hausdorff), 100 * shift / std::sqrt(2.0), 1e-6);
+}
+
 // Two meshes read far from zero with different origins (IndexedMesh::origin): the same lifted plane as above,
 // its positions relative to an origin 0.25 and 0.5 away from the plane's, is still 0.05 away.
 TEST(MeasureDistance, MeshesWithDifferentOriginsMeetInOneFrame) {

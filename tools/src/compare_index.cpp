@@ -189,9 +189,14 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
       used[v] = 1;
     }
   }
-  for (std::size_t v = 0; v < vertex_count; ++v)
-    if (used[v]) impl.referenced_vertices.push_back(static_cast<Index>(v));
-  impl.bounds = mesh.bounds();
+  for (std::size_t v = 0; v < vertex_count; ++v) {
+    if (!used[v]) continue;
+    impl.referenced_vertices.push_back(static_cast<Index>(v));
+    impl.bounds.add(mesh.positions[v]);
+  }
+  // The box of the surface, so a stray vertex no face uses does not shrink every percentage of its diagonal
+  // (one at (100, 100, 100) beside a unit square, 120 times); a mesh of no faces has only its vertices.
+  if (impl.referenced_vertices.empty()) impl.bounds = mesh.bounds();
   impl.coordinate_scale =
       std::max(impl.bounds.lo.cwiseAbs().maxCoeff(), impl.bounds.hi.cwiseAbs().maxCoeff());
   // Below float's normal range the coordinates are subnormal, which Embree's threads read as zero (they set

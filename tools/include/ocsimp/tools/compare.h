@@ -78,7 +78,7 @@ class DistanceIndex {
   std::size_t triangle_count() const;
   std::size_t referenced_vertex_count() const;  // vertices that some triangle uses: the vertex samples
   double area() const;
-  Box3 bounds() const;  // of every position, like IndexedMesh::bounds()
+  Box3 bounds() const;  // of the positions some triangle uses (of every position when none does)
   // The mesh's origin: positions, samples and bounds are relative to it. Meshes with different origins are
   // measured in a common frame (each sample moved by the difference of the two origins, in double).
   Vec3d origin() const;
@@ -119,7 +119,7 @@ struct SurfaceDistance {
   OneSidedDistance forward;                 // samples on the original, distances to the simplified surface
   OneSidedDistance backward;                // samples on the simplified surface, distances to the original
   double hausdorff = 0, mean = 0, rms = 0;  // symmetric, as defined at the top of this file
-  double diagonal = 0;                      // of the original's bounding box
+  double diagonal = 0;                      // of the original's bounding box (DistanceIndex::bounds)
 
   // Both directions' refinements settled: `hausdorff` is within the tolerance of the true one, not a lower
   // bound.
