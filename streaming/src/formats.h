@@ -57,6 +57,13 @@ inline std::string clamped_colors_note(std::uint64_t vertices) {
          " a floating-point color channel outside 0..1, clamped to it (are the colors on a 0..255 scale?)";
 }
 
+// The same for a PLY's integer color channels outside 0..255 (but for ushort's 0..65535, see the PLY
+// reader's byte_scale_color).
+inline std::string clamped_integer_colors_note(std::uint64_t vertices) {
+  return std::to_string(vertices) + (vertices == 1 ? " vertex has" : " vertices have") +
+         " an integer color channel outside 0..255, clamped to it";
+}
+
 // What ReadOptions::warn is told when face corners gave vertices different texture coordinates
 // (`uv_seam_vertices` of them) or normals (`hard_edge_vertices`); empty when neither.
 inline std::string merged_corners_note(std::uint64_t uv_seam_vertices, std::uint64_t hard_edge_vertices) {

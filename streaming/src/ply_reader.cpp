@@ -137,14 +137,17 @@ std::pair<std::int64_t, std::int64_t> integer_range(PlyType type) {
   return {INT64_MIN, INT64_MAX};
 }
 
-// 8-bit integer colors are the byte itself (a signed "char" too: writers use it for 0..255 as well); wider
-// integers span their type's positive range (a 16-bit 32768 is mid-grey, 128), as floating-point colors span
-// [0, 1].
+// Whether a color channel of this type spans 0..255: every integer type but ushort. Unsigned 16 bits is the
+// one wider integer encoding of color in use (16-bit PNG and TIFF channels), and spans 0..65535; the other
+// integer types turn up where a writer stores every number as one type, with 0..255 in them (read over the
+// type's range, an int's 255 came out black). Floating-point colors span [0, 1].
+bool byte_scale_color(PlyType type) {
+  return ply_type_is_integer(type) && type != PlyType::uint16;
+}
+
 std::uint8_t color_channel(double value, PlyType type) {
-  if (type == PlyType::int8 || type == PlyType::uint8) {
-    return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
-  }
-  const double unit = ply_type_is_integer(type) ? value / double(integer_range(type).second) : value;
+  if (byte_scale_color(type)) return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
+  const double unit = type == PlyType::uint16 ? value / 65535.0 : value;
   if (!(unit > 0.0)) return 0;
   if (unit >= 1.0) return 255;
   return static_cast<std::uint8_t>(std::lround(unit * 255.0));
@@ -198,7 +201,7 @@ std::size_t scan_points(const float* xyz, std::size_t n, float* lo, float* hi) {
 
 enum class Slot : std::uint8_t { none, x, y, z, nx, ny, nz, red, green, blue, alpha, u, v };
 
-// What color_check says of a floating-point color channel, which spans [0, 1].
+// What color_check says of a color channel outside its type's span (see byte_scale_color).
 enum class ColorCheck : std::uint8_t { in_range, clamped, not_finite };
 
 struct VertexValues {
@@ -229,9 +232,10 @@ void set_value(VertexValues& values, Slot slot, PlyType type, double value) {
     case Slot::alpha:
       values.color[int(slot) - int(Slot::red)] = color_channel(value, type);
       values.color_check[int(slot) - int(Slot::red)] =
-          ply_type_is_integer(type) || (value >= 0.0 && value <= 1.0) ? ColorCheck::in_range
-          : std::isfinite(value)                                      ? ColorCheck::clamped
-                                                                      : ColorCheck::not_finite;
+          type == PlyType::uint16 || (value >= 0.0 && value <= (byte_scale_color(type) ? 255.0 : 1.0))
+              ? ColorCheck::in_range
+          : std::isfinite(value) ? ColorCheck::clamped
+                                 : ColorCheck::not_finite;
       break;
     case Slot::u:
     case Slot::v:
@@ -407,7 +411,8 @@ class PlyStream final : public TriangleStream {
   // What the file holds that no output keeps (unread_note, colors finer than 8 bits), said once every face is
   // read: a file that then fails got the warning and its error both.
   std::vector<std::string> notes_at_end_;
-  std::uint64_t clamped_colors_ = 0;  // vertices with a floating-point color channel outside [0, 1]
+  std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside its span (byte_scale_color)
+  bool integer_colors_ = false;       // the red channel's type is an integer, for the note on clamped ones
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
   // the start: the origin stays zero.
@@ -597,7 +602,9 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
     // Colors are held, and written, at 8 bits a channel: 16-bit or floating-point ones lose their low bits.
     for (std::size_t i = 0; i < vertex_plan_.slots.size(); ++i) {
       const PlyType type = vertex_element.properties[i].type;
-      if (vertex_plan_.slots[i] == Slot::red && type != PlyType::uint8 && type != PlyType::int8) {
+      if (vertex_plan_.slots[i] != Slot::red) continue;
+      integer_colors_ = ply_type_is_integer(type);
+      if (!byte_scale_color(type)) {
         notes_at_end_.push_back(std::string("its colors, stored as ") + ply_type_name(type) +
                                 ", are kept to 8 bits a channel, as every output writes them");
       }
@@ -964,7 +971,10 @@ void PlyStream::load_vertices() {
     settle_origin();  // fewer vertices than the sample
     flush_vertices();
   }
-  if (warn_ && clamped_colors_ > 0) warn_(clamped_colors_note(clamped_colors_));
+  if (warn_ && clamped_colors_ > 0) {
+    warn_(integer_colors_ ? clamped_integer_colors_note(clamped_colors_)
+                          : clamped_colors_note(clamped_colors_));
+  }
   report_progress();
 }
 

@@ -516,23 +516,41 @@ TEST(PlyTypes, DoubleCoordinatesAreRoundedToFloat) {
   EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{{0, 1, 2}}));
 }
 
-// Integer colors wider than a byte span their type's range; they were clamped, so mid-grey came out white.
-TEST(PlyTypes, WideIntegerColorsAreScaled) {
+// Unsigned 16-bit colors span 0..65535 (mid-grey, 32768, is 128). Other integer types hold 0..255: read over
+// their type's range, an int's 255 came out black; values outside are clamped, and the reader says how many
+// vertices have one. An int channel holding 0..255 loses nothing, so it gets no note on 8 bits.
+TEST(PlyTypes, IntegerColorsSpanZeroTo255ButUshortSpansItsRange) {
   test::TempDir dir;
   const std::string header =
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
       "property ushort red\nproperty short green\nproperty uint blue\nproperty char alpha\n"
       "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
   write_bytes(dir / "c.ply", header +
-                                 "0 0 0 65535 32767 0 100\n"
-                                 "1 0 0 32768 -5 2147483648 -3\n"
+                                 "0 0 0 65535 255 0 100\n"
+                                 "1 0 0 32768 -5 128 -3\n"
                                  "0 1 0 300 16384 4294967295 127\n"
                                  "3 0 1 2\n");
-  const IndexedMesh mesh = read_mesh(dir / "c.ply");
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  const IndexedMesh mesh = read_mesh(dir / "c.ply", options);
   ASSERT_EQ(mesh.colors.size(), 3u);
   EXPECT_EQ(mesh.colors[0], (Color{255, 255, 0, 100}));
   EXPECT_EQ(mesh.colors[1], (Color{128, 0, 128, 0}));
-  EXPECT_EQ(mesh.colors[2], (Color{1, 128, 255, 127}));
+  EXPECT_EQ(mesh.colors[2], (Color{1, 255, 255, 127}));
+  EXPECT_EQ(told,
+            (std::vector<std::string>{
+                "2 vertices have an integer color channel outside 0..255, clamped to it",
+                "its colors, stored as ushort, are kept to 8 bits a channel, as every output writes them"}));
+
+  told.clear();
+  write_bytes(dir / "i.ply",
+              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+              "property float z\nproperty int red\nproperty int green\nproperty int blue\n"
+              "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+              "0 0 0 255 0 128\n1 0 0 1 2 3\n0 1 0 7 8 9\n3 0 1 2\n");
+  EXPECT_EQ(read_mesh(dir / "i.ply", options).colors[0], (Color{255, 0, 128, 255}));
+  EXPECT_TRUE(told.empty()) << told[0];
 }
 
 // A big-endian file written by hand with every attribute, and unusual types for each.
