@@ -2,10 +2,12 @@
 
 #include <gtest/gtest.h>
 
-#include <cmath>
 #include <tbb/global_control.h>
+#include <cmath>
 
+#include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
+#include "ocsimp/streaming/io.h"
 #include "test_support.h"
 
 namespace ocsimp {
@@ -76,7 +78,8 @@ TEST(Generate, HolesOpenBordersAndKeepTheMeshClean) {
   EXPECT_EQ(topo.unreferenced_vertices, 0u);
   EXPECT_EQ(topo.components, 1u);
   // Each hole leaves one boundary loop: V - E + F = 2 - holes for a sphere with that many holes.
-  EXPECT_EQ(static_cast<long>(mesh.vertex_count()) - static_cast<long>(topo.edges) + static_cast<long>(mesh.face_count()),
+  EXPECT_EQ(static_cast<long>(mesh.vertex_count()) - static_cast<long>(topo.edges) +
+                static_cast<long>(mesh.face_count()),
             2 - 6);
 }
 
@@ -116,9 +119,32 @@ TEST(Generate, NoiseIsScannerScale) {
   const IndexedMesh a = generate_scan_mesh(quiet), b = generate_scan_mesh(noisy);
   const double edge = 0.5 * M_PI / static_cast<double>(generated_counts(quiet).lattice);
   double largest = 0;
-  for (std::size_t v = 0; v < a.vertex_count(); ++v) largest = std::max(largest, double((a.positions[v] - b.positions[v]).norm()));
+  for (std::size_t v = 0; v < a.vertex_count(); ++v)
+    largest = std::max(largest, double((a.positions[v] - b.positions[v]).norm()));
   EXPECT_GT(largest, 0.1 * edge);
   EXPECT_LE(largest, 0.5 * edge + 1e-6);
+}
+
+// A georeferenced mesh keeps its detail in the file's doubles up to an offset of 1e9 (1.2e-7 apart there);
+// beyond, the offset is refused: at 1e15 a blob had 18 distinct x values and hundreds of degenerate faces.
+TEST(Generate, OffsetsStayWhereDoublesHoldTheDetail) {
+  test::TempDir dir;
+  GenerateOptions far = small(200'000);
+  far.offset = Vec3d(-kMostOffset, 0.5 * kMostOffset, 3);
+  generate_scan_ply(dir / "far.ply", far);
+  const IndexedMesh mesh = read_mesh(dir / "far.ply");
+  EXPECT_NEAR(mesh.origin.x(), -kMostOffset, 2.0);
+  EXPECT_EQ(analyze_topology(mesh).degenerate_faces, 0u);
+  std::size_t flat = 0;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3f& p = mesh.positions[t[0]];
+    flat += (mesh.positions[t[1]] - p).cross(mesh.positions[t[2]] - p).squaredNorm() == 0;
+  }
+  EXPECT_EQ(flat, 0u);
+  for (const double beyond : {1.5 * kMostOffset, -1e15, std::numeric_limits<double>::infinity()}) {
+    far.offset = Vec3d(3, beyond, 0);
+    EXPECT_THROW(generate_scan_mesh(far), Error) << beyond;
+  }
 }
 
 }  // namespace

@@ -23,7 +23,8 @@ void add_gen_command(CLI::App& app) {
       ->check(file_name())
       ->required();
   cmd->add_option("--triangles", flags->options.triangles,
-                  "Triangles wanted; the lattice reaches the nearest 12 n^2 per component")
+                  "Triangles wanted; the lattice reaches the nearest 12 n^2 per component (n at least 12 "
+                  "with --holes: 1,728 triangles a component)")
       ->capture_default_str()
       // 12 n^2 at the largest n whose 6 n^2 + 2 vertices 32-bit indices number (n = 26,754).
       ->transform(whole_number(12, 8'589'318'192));
@@ -36,12 +37,13 @@ void add_gen_command(CLI::App& app) {
   cmd->add_option("--holes", flags->options.holes, "Holes cut into each blob, leaving open borders")
       ->capture_default_str()
       ->transform(whole_number(0, 6));
-  cmd->add_option("--noise", flags->options.noise, "Scanner noise, in mean edge lengths")
+  cmd->add_option("--noise", flags->options.noise, "Scanner noise, in mean edge lengths (0..10)")
       ->capture_default_str();
   cmd->add_option_function<std::vector<double>>(
          "--offset",
          [flags](const std::vector<double>& xyz) { flags->options.offset = Vec3d(xyz[0], xyz[1], xyz[2]); },
-         "Place the mesh around this point (X Y Z), in double coordinates, as a georeferenced scan")
+         "Place the mesh around this point (X Y Z, each within 1e9 of zero), in double coordinates, as a "
+         "georeferenced scan")
       ->expected(3)
       ->check(CLI::Number);
   cmd->add_flag("--normals", flags->options.normals, "Write per-vertex normals");

@@ -62,8 +62,12 @@ class ScanSurface {
   explicit ScanSurface(const GenerateOptions& options) : options_(options) {
     if (options.components < 1 || options.components > 1000) throw Error("--components must be in 1..1000");
     if (options.holes < 0 || options.holes > 6) throw Error("--holes must be in 0..6 (one per cube face)");
-    if (!options.offset.allFinite() || options.offset.cwiseAbs().maxCoeff() > 1e15)
-      throw Error("--offset must be finite, within 1e15 of zero");
+    // Beyond 1e9 a double's spacing (1.2e-7 there) reaches the finest lattice's detail: at 1e15 a blob had 18
+    // distinct x values. Georeferenced frames stay far below (UTM northings 1e7, geocentric 6.4e6).
+    if (!options.offset.allFinite() || options.offset.cwiseAbs().maxCoeff() > kMostOffset)
+      throw Error(
+          "--offset must be finite, each coordinate within 1e9 of zero (farther, doubles cannot hold the "
+          "mesh's detail)");
     if (!(options.noise >= 0.0) || options.noise > 10.0) throw Error("--noise must be in 0..10");
     const double per_component = static_cast<double>(options.triangles) / options.components;
     n_ = std::max<std::uint64_t>(static_cast<std::uint64_t>(std::llround(std::sqrt(per_component / 12.0))),

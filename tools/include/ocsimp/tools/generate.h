@@ -12,6 +12,8 @@
 
 namespace ocsimp {
 
+inline constexpr double kMostOffset = 1e9;  // GenerateOptions::offset's limit, see generate.cpp
+
 struct GenerateOptions {
   std::uint64_t triangles =
       2'000'000;  // requested; the mesh has the nearest count its lattice reaches (below)
@@ -22,8 +24,9 @@ struct GenerateOptions {
   bool normals = false;  // write per-vertex normals (of the smooth surface)
   bool colors = false;   // write per-vertex colors (a function of position)
   bool ascii = false;    // ascii PLY instead of binary
-  // Where the mesh is placed: about a unit blob around this point. Unless it is zero the PLY holds double
-  // coordinates, as georeferenced scans do (IndexedMesh::origin).
+  // Where the mesh is placed: about a unit blob around this point, each coordinate within kMostOffset of
+  // zero. Unless it is zero the PLY holds double coordinates, as georeferenced scans do
+  // (IndexedMesh::origin).
   Vec3d offset = Vec3d::Zero();
   int threads = 0;      // 0: all cores; output does not depend on it
   ProgressFn progress;  // "generate" phase, in faces written
