@@ -100,7 +100,8 @@ TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
       {"decimate in.ply -o out.ply --vertices 1.5", "--vertices: '1.5' is not a whole number >= 1"},
       {"simplify in.ply -o out.ply --faces -1", "--faces: '-1' is not a whole number >= 1"},
       {"decimate in.ply -o out.ply --ratio 0", "--ratio: '0' is not a number in (0, 1]"},
-      {"decimate in.ply -o out.ply --max-error -1e-9", "--max-error: '-1e-9' is not a number >= 0 (or inf)"},
+      {"decimate in.ply -o out.ply --max-error -1e-9",
+       "--max-error: '-1e-9' is not a number >= 0 (inf: no bound)"},
       {"decimate in.ply -o out.ply --boundary-weight nan", "'nan' is not a finite number >= 0"},
       {"cluster in.ply -o out.ply --cell-size 0", "--cell-size: '0' is not a finite number > 0"},
       {"cluster in.ply -o out.ply --grid 10 --threads -1",
@@ -198,6 +199,25 @@ TEST(Cli, InfoCountsZeroAreaFacesApartFromRepeatedCorners) {
   EXPECT_EQ(j["zero_area_faces"].get<long>(), 2);
   const CommandResult text = run("info " + (dir / "m.ply"), dir);
   EXPECT_NE(text.out.find("  zero-area faces        2\n"), std::string::npos) << text.out;
+}
+
+// The box's sides are told apart however far from zero a float file lies: a 2-wide square at UTM northings
+// printed as (499999, 4e+06, 0) .. (500001, 4e+06, 0).
+TEST(Cli, InfoPrintsTheBoxWithTheDigitsItsExtentNeeds) {
+  test::TempDir dir;
+  IndexedMesh mesh = test::grid_square(2);
+  for (Vec3f& p : mesh.positions) p = 2.0f * p + Vec3f(499999.0f, 4000001.0f, 0.0f);
+  write_mesh(dir / "far.stl", mesh);
+  const CommandResult text = run("info " + (dir / "far.stl"), dir);
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_NE(text.out.find("  bounding box           (499999, 4000001, 0) .. (500001, 4000003, 0)\n"),
+            std::string::npos)
+      << text.out;
+  // Near zero, six digits as before.
+  write_mesh(dir / "near.ply", test::grid_square(3));
+  EXPECT_NE(
+      run("info " + (dir / "near.ply"), dir).out.find("  bounding box           (0, 0, 0) .. (1, 1, 0)\n"),
+      std::string::npos);
 }
 
 // A file of no vertex has no bounding box: the text said (inf, inf, inf) .. (-inf, -inf, -inf), where --json
@@ -1041,10 +1061,23 @@ TEST(Cli, ListsRefuseEmptyAndRepeatedItems) {
   EXPECT_EQ(lines(above.err), 1u) << above.err;
   const CommandResult level = run(lod + "--faces " + std::to_string(all + 1) + ",10", dir);
   ASSERT_EQ(level.exit_code, 0) << level.err;
-  EXPECT_NE(level.err.find("level " + std::to_string(all + 1) + " is not below the input's " + whole),
+  EXPECT_NE(level.err.find("the target of " + std::to_string(all + 1) + " faces is not below the " + whole +
+                           " it decimates: none is removed"),
             std::string::npos)
       << level.err;
+  EXPECT_EQ(lines(level.err), 1u) << level.err;
   EXPECT_EQ(read_mesh(dir / ("l" + std::to_string(all + 1) + ".ply")).face_count(), all);
+  // decimate and simplify say so as well (they wrote the input back without a word).
+  const std::string& in = mesh;
+  for (const std::string& command : {"decimate -q " + in + " -o " + (dir / "d.ply") + " --faces " + whole,
+                                     "simplify -q " + in + " -o " + (dir / "d.ply") + " --ratio 1",
+                                     "decimate -q " + in + " -o " + (dir / "d.ply") + " --vertices 100000"}) {
+    const CommandResult r = run(command, dir);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find(" is not below the "), std::string::npos) << command << "\n" << r.err;
+    EXPECT_EQ(lines(r.err), 1u) << r.err;
+    EXPECT_EQ(read_mesh(dir / "d.ply").face_count(), all);
+  }
 }
 
 // A summary printed after a report sent to standard output made it unreadable as JSON; simplify and lod

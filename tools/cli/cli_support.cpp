@@ -220,10 +220,15 @@ std::vector<std::string> parse_name_list(const std::string& text, const std::str
 }
 
 void add_weld_flag(CLI::App* cmd, bool& weld) {
-  cmd->add_flag("--weld,!--no-weld", weld,
-                "Merge vertices at exactly equal positions before decimating, so seams and the corners of a "
-                "triangle soup move as one (default; each side of a texture or normal seam keeps its "
-                "attributes). --no-weld: each copy is a separate border");
+  // Two flags rather than CLI11's "--weld,!--no-weld", whose help read "--weld,--no-weld{false}", as if
+  // welding were off by default.
+  CLI::Option* on = cmd->add_flag_callback(
+      "--weld", [&weld] { weld = true; },
+      "Merge vertices at exactly equal positions before decimating, so seams and the corners of a triangle "
+      "soup move as one (the default; each side of a texture or normal seam keeps its attributes)");
+  cmd->add_flag_callback(
+         "--no-weld", [&weld] { weld = false; }, "Do not weld: each copy is a separate border")
+      ->excludes(on);
 }
 
 CLI::Validator byte_size() {
@@ -240,7 +245,7 @@ CLI::Validator byte_size() {
 }
 
 CLI::Validator non_negative_number(bool or_infinity) {
-  return number_check(or_infinity ? "a number >= 0 (or inf)" : "a finite number >= 0",
+  return number_check(or_infinity ? "a number >= 0 (inf: no bound)" : "a finite number >= 0",
                       [or_infinity](double v) { return v >= 0 && (or_infinity || !std::isinf(v)); });
 }
 

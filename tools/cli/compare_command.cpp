@@ -57,9 +57,9 @@ void add_compare_command(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "compare",
       "Measure how far a simplified mesh is from its original: Hausdorff, mean and RMS distance both ways "
-      "(area-uniform samples plus vertices, exact closest points, the Hausdorff distance refined to 0.01 %), "
-      "also "
-      "as % of the original's diagonal");
+      "(area-uniform samples plus vertices, exact closest points, the Hausdorff distance refined to within "
+      "0.01 % or, where that does not settle, given with an upper bound), also as % of the original's "
+      "diagonal");
   struct Flags {
     std::string original;
     std::string simplified;

@@ -15,7 +15,8 @@ void add_convert_command(CLI::App& app) {
   auto flags = std::make_shared<Flags>();
   cmd->add_option("input", flags->input, "Input mesh (format detected from content)")->required();
   // Also as -o, the spelling every other command that writes a mesh takes.
-  cmd->add_option("output,-o,--output", flags->output, "Output mesh (.ply, .obj, .stl or .drc)")
+  cmd->add_option("output,-o,--output", flags->output,
+                  "Output mesh (.ply, .obj, .stl or .drc), given either after the input or after -o")
       ->check(file_name())
       ->required();
   cmd->add_flag("--ascii", flags->write.ascii, "Text PLY or STL instead of binary");

@@ -494,6 +494,13 @@ void check_input_faces(const std::string& path, const WarningFn& warn, bool weld
   if (!warn) return;
   if (const std::string note = dropped_faces_note(stats); !note.empty()) warn(note);
   if (const std::string note = separate_faces_note(stats, weld); !note.empty()) warn(note);
+  // As lod and bench say of a level: a target the input already meets removes nothing.
+  const bool faces = stats.target_faces > 0 && stats.target_faces >= stats.input_faces;
+  if (faces || (stats.target_vertices > 0 && stats.target_vertices >= stats.input_vertices)) {
+    warn("the target of " + std::to_string(faces ? stats.target_faces : stats.target_vertices) +
+         (faces ? " faces" : " vertices") + " is not below the " +
+         std::to_string(faces ? stats.input_faces : stats.input_vertices) + " it decimates: none is removed");
+  }
 }
 
 std::string attributes_left_out_warning(const std::string& left_out) {
@@ -622,12 +629,6 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     }
   }
   if (options.on_targets) options.on_targets(levels);
-  for (std::uint64_t faces : levels) {
-    if (faces >= stage.input_faces && options.warn) {
-      options.warn("level " + std::to_string(faces) + " is not below the input's " +
-                   std::to_string(stage.input_faces) + " faces: its file holds them all");
-    }
-  }
   LodResult result;
   report_first_stage(stage, result);
 
