@@ -516,6 +516,17 @@ TEST(PlyTypes, DoubleCoordinatesAreRoundedToFloat) {
   EXPECT_EQ(mesh.triangles, (std::vector<Triangle>{{0, 1, 2}}));
 }
 
+// An ASCII PLY of one triangle whose vertices have red, green and blue properties of `type`, with these
+// values ("r g b") at its three corners.
+std::string rgb_triangle(const std::string& type, const std::array<std::string, 3>& colors) {
+  return "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+         "property " +
+         type + " red\nproperty " + type + " green\nproperty " + type +
+         " blue\n"
+         "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0 " +
+         colors[0] + "\n1 0 0 " + colors[1] + "\n0 1 0 " + colors[2] + "\n3 0 1 2\n";
+}
+
 // Unsigned 16-bit colors span 0..65535 (mid-grey, 32768, is 128). Other integer types hold 0..255: read over
 // their type's range, an int's 255 came out black; values outside are clamped, and the reader says how many
 // vertices have one. An int channel holding 0..255 loses nothing, so it gets no note on 8 bits.
@@ -544,11 +555,7 @@ TEST(PlyTypes, IntegerColorsSpanZeroTo255ButUshortSpansItsRange) {
                 "its colors, stored as ushort, are kept to 8 bits a channel, as every output writes them"}));
 
   told.clear();
-  write_bytes(dir / "i.ply",
-              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-              "property float z\nproperty int red\nproperty int green\nproperty int blue\n"
-              "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
-              "0 0 0 255 0 128\n1 0 0 1 2 3\n0 1 0 7 8 9\n3 0 1 2\n");
+  write_bytes(dir / "i.ply", rgb_triangle("int", {"255 0 128", "1 2 3", "7 8 9"}));
   EXPECT_EQ(read_mesh(dir / "i.ply", options).colors[0], (Color{255, 0, 128, 255}));
   EXPECT_TRUE(told.empty()) << told[0];
 }
@@ -629,11 +636,7 @@ TEST(PlyTypes, FloatColorsOutsideZeroToOneAreClampedWithAWarning) {
   EXPECT_EQ(told, std::vector<std::string>{eight_bits});
   // 8-bit colors lose nothing: no word.
   told.clear();
-  write_bytes(dir / "e.ply",
-              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-              "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
-              "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
-              "0 0 0 1 2 3\n1 0 0 4 5 6\n0 1 0 7 8 9\n3 0 1 2\n");
+  write_bytes(dir / "e.ply", rgb_triangle("uchar", {"1 2 3", "4 5 6", "7 8 9"}));
   EXPECT_EQ(read_mesh(dir / "e.ply", options).colors[2], (Color{7, 8, 9, 255}));
   EXPECT_TRUE(told.empty()) << told[0];
 }
