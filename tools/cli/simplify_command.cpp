@@ -79,8 +79,9 @@ void add_simplify_command(CLI::App& app) {
       "default at least 262,144 faces, is decimated directly unless --intermediate is given)");
   cmd->add_option(
       "--intermediate", o.intermediate,
-      "Intermediate faces as a multiple of the target (default: from the memory budget, at most 8, and at "
-      "least 262,144 faces where the budget has room)");
+      "Intermediate faces as a multiple of the target, for a run that clusters first (--two-stage, or an "
+      "input past the memory budget); an input that fits is otherwise decimated directly (default: from the "
+      "memory budget, at most 8, and at least 262,144 faces where the budget has room)");
   add_weld_flag(cmd, o.decimate.weld);
   cmd->add_option("--threads", o.threads, "Threads (0 = all cores); the output does not depend on it")
       ->capture_default_str()
