@@ -384,6 +384,25 @@ TEST(MeasureDistance, AStrayVertexDoesNotChangeTheDiagonal) {
   EXPECT_NEAR(d.percent(d.hausdorff), 100 * shift / std::sqrt(2.0), 1e-6);
 }
 
+// A float mesh far from zero for its size (no origin of its own, as an STL at UTM northings) is indexed
+// about its centre: Embree's culling, widened by 1e-6 of the coordinates, took in every triangle there, and
+// comparing such a scan with itself ran for hours. The distances are as exact as near zero.
+TEST(MeasureDistance, AFloatMeshFarFromZeroIsIndexedAboutItsCentre) {
+  const Vec3f far(500000.0f, 4000000.0f, 0.0f);
+  const float shift = 0.25f;
+  IndexedMesh plane = test::grid_square(8), lifted = test::grid_square(3);
+  for (Vec3f& p : plane.positions) p = 16.0f * p + far;
+  for (Vec3f& p : lifted.positions) p = 16.0f * p + far + Vec3f(0, 0, shift);
+  const DistanceIndex index(plane, "far");
+  EXPECT_LT((index.origin() - far.cast<double>()).norm(), 16.0);
+  EXPECT_NEAR(index.bounds().diagonal(), 16.0 * std::sqrt(2.0), 1e-9);
+  CompareOptions options;
+  options.samples = 5000;
+  const SurfaceDistance d = measure_distance(plane, lifted, options);
+  EXPECT_NEAR(d.hausdorff, shift, 1e-9);
+  EXPECT_NEAR(d.rms, shift, 1e-9);
+}
+
 // Two meshes read far from zero with different origins (IndexedMesh::origin): the same lifted plane as above,
 // its positions relative to an origin 0.25 and 0.5 away from the plane's, is still 0.05 away.
 TEST(MeasureDistance, MeshesWithDifferentOriginsMeetInOneFrame) {

@@ -197,6 +197,20 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   // The box of the surface, so a stray vertex no face uses does not shrink every percentage of its diagonal
   // (one at (100, 100, 100) beside a unit square, 120 times); a mesh of no faces has only its vertices.
   if (impl.referenced_vertices.empty()) impl.bounds = mesh.bounds();
+  // A mesh far from zero for its size (a float scan at UTM northings, 4e6 out and 15 wide) is indexed about
+  // its own centre. Embree's float culling is widened by about 1e-6 of the coordinates, which there exceeded
+  // the mesh: every query visited every triangle, and comparing such a mesh with itself ran for hours. The
+  // shift is a float near the centre, on each axis whose coordinates stay within half to twice it, so that
+  // every position minus it is exact (Sterbenz).
+  Vec3d shift = Vec3d::Zero();
+  if (!impl.bounds.empty()) {
+    const Vec3d center = impl.bounds.center(), extent = impl.bounds.extent();
+    for (int a = 0; a < 3; ++a)
+      if (std::abs(center[a]) > extent[a]) shift[a] = static_cast<double>(static_cast<float>(center[a]));
+    impl.bounds.lo -= shift;
+    impl.bounds.hi -= shift;
+    impl.origin += shift;
+  }
   impl.coordinate_scale =
       std::max(impl.bounds.lo.cwiseAbs().maxCoeff(), impl.bounds.hi.cwiseAbs().maxCoeff());
   // Below float's normal range the coordinates are subnormal, which Embree's threads read as zero (they set
@@ -239,7 +253,8 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   }
   const auto embree_scale = static_cast<float>(impl.embree_scale);
   for (std::size_t v = 0; v < vertex_count; ++v)
-    for (int k = 0; k < 3; ++k) positions[3 * v + k] = mesh.positions[v][k] * embree_scale;
+    for (int k = 0; k < 3; ++k)
+      positions[3 * v + k] = static_cast<float>(double(mesh.positions[v][k]) - shift[k]) * embree_scale;
   if (!repeats) {
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
       for (int k = 0; k < 3; ++k) corners[3 * f + k] = mesh.triangles[f][k];

@@ -34,7 +34,7 @@ struct DistanceIndex::Impl {
   std::size_t last_sampled_triangle = 0;   // the last triangle of positive area
   std::vector<Index> referenced_vertices;  // ascending
   Box3 bounds;
-  Vec3d origin = Vec3d::Zero();  // the mesh's (IndexedMesh::origin): positions are relative to it
+  Vec3d origin = Vec3d::Zero();  // DistanceIndex::origin(): positions are relative to it
   double coordinate_scale = 0;   // largest absolute coordinate: sizes the margin for Embree's float culling
   // A power of two: Embree's buffer holds the positions times `embree_scale` (exactly), and queries are
   // scaled alike, whenever the coordinates are so small or large that Embree's float arithmetic would

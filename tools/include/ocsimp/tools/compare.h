@@ -78,8 +78,9 @@ class DistanceIndex {
   std::size_t triangle_count() const;
   std::size_t referenced_vertex_count() const;  // vertices that some triangle uses: the vertex samples
   double area() const;
-  Box3 bounds() const;  // of the positions some triangle uses (of every position when none does)
-  // The mesh's origin: positions, samples and bounds are relative to it. Meshes with different origins are
+  Box3 bounds() const;  // of the positions some triangle uses (every one when none does), about origin()
+  // The index's origin, the mesh's or a point near its centre when it lies far from zero for its size:
+  // positions, samples and bounds are relative to it. Meshes with different origins are
   // measured in a common frame (each sample moved by the difference of the two origins, in double).
   Vec3d origin() const;
 
