@@ -132,6 +132,7 @@ class ObjStream final : public TriangleStream {
     }
     if (batch.size() > 0) return true;
     if (warn_ && !unread_note_.empty()) warn_(std::exchange(unread_note_, {}));
+    if (warn_ && concave_fans_ > 0) warn_(concave_fans_note(std::exchange(concave_fans_, 0)));
     return false;
   }
 
@@ -460,7 +461,7 @@ class ObjStream final : public TriangleStream {
     polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size(),
                                           [&](Index a, Index b) { return same_point(a, b); }));
     if (!positions_known()) return fan_triangles(polygon_.data(), polygon_.size(), emit);
-    polygon_triangles(
+    concave_fans_ += polygon_triangles(
         polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },
         polygon_scratch_, emit);
   }
@@ -591,6 +592,7 @@ class ObjStream final : public TriangleStream {
   // fails got the warning and its error both.
   std::string unread_note_;
   std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside [0, 1]
+  std::uint64_t concave_fans_ = 0;    // polygons polygon_triangles fanned though concave
   // Out of core (ReadOptions::vertex_sink): positions and colors go there a chunk at a time; no vertex array
   // is kept.
   std::function<void(const VertexChunk&)> vertex_sink_;

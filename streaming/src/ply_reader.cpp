@@ -412,6 +412,7 @@ class PlyStream final : public TriangleStream {
   // read: a file that then fails got the warning and its error both.
   std::vector<std::string> notes_at_end_;
   std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside its span (byte_scale_color)
+  std::uint64_t concave_fans_ = 0;    // polygons polygon_triangles fanned though concave
   bool integer_colors_ = false;       // the red channel's type is an integer, for the note on clamped ones
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
   // Unless x y z are of double or 32-bit integer type (more precise than floats far from zero), settled from
@@ -1289,6 +1290,7 @@ void PlyStream::finish_faces() {
   report_progress(true);
   if (warn_) {
     for (const std::string& note : std::exchange(notes_at_end_, {})) warn_(note);
+    if (concave_fans_ > 0) warn_(concave_fans_note(std::exchange(concave_fans_, 0)));
   }
 }
 
@@ -1338,7 +1340,7 @@ void PlyStream::add_corner(std::int64_t index, std::uint64_t offset) {
 void PlyStream::emit_polygon() {
   polygon_.resize(drop_repeated_corners(polygon_.data(), polygon_.size(),
                                         [&](Index a, Index b) { return same_point(a, b); }));
-  polygon_triangles(
+  concave_fans_ += polygon_triangles(
       polygon_.data(), polygon_.size(), [&](std::size_t i) { return position(polygon_[i]); },
       polygon_scratch_,
       [&](const Triangle& t) {

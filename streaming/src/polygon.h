@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <string>
 #include <vector>
 
 #include "ocsimp/core/mesh.h"
@@ -16,8 +17,18 @@
 namespace ocsimp::detail {
 
 // Above this many corners a concave polygon keeps its fan: ear clipping tests each candidate ear against the
-// polygon's reflex corners, which for a large outline with many of them is quadratic or worse.
+// polygon's reflex corners, which for a large outline with many of them is quadratic or worse. The readers
+// say how many they fanned so (concave_fans_note): a comb of 4,098 corners covered 850 times its area.
 inline constexpr std::size_t kMaxClippedCorners = 4096;
+
+// What ReadOptions::warn is told when `polygons` concave polygons were fanned for their size.
+inline std::string concave_fans_note(std::uint64_t polygons) {
+  const bool one = polygons == 1;
+  return std::to_string(polygons) + (one ? " concave polygon has" : " concave polygons have") +
+         " more than " + std::to_string(kMaxClippedCorners) +
+         (one ? " corners and was" : " corners and were") +
+         " fanned from the first corner: some triangles cover ground outside the polygon";
+}
 
 // Scratch of polygon_triangles, kept by a reader across faces so that it allocates once.
 struct PolygonScratch {
@@ -55,12 +66,15 @@ void fan_triangles(const Corner* corners, std::size_t n, const Emit& emit) {
 
 // Appends the n - 2 triangles of polygon `corners` (n >= 3, in the file's order) to `out`, each turning as
 // the polygon does. `position(i)` gives corner i's position. A polygon without area, or too large to clip, is
-// fanned from its first corner.
+// fanned from its first corner. Returns whether it fanned a concave polygon (one too large to clip).
 template <class Corner, class Position, class Emit>
-void polygon_triangles(const Corner* corners, std::size_t n, const Position& position, PolygonScratch& s,
+bool polygon_triangles(const Corner* corners, std::size_t n, const Position& position, PolygonScratch& s,
                        const Emit& emit) {
-  auto fan = [&] { fan_triangles(corners, n, emit); };
-  if (n <= 3 || n > kMaxClippedCorners) return fan();
+  auto fan = [&] {
+    fan_triangles(corners, n, emit);
+    return false;
+  };
+  if (n <= 3) return fan();
   // Newell's normal of the polygon; its largest axis is dropped to work in the plane.
   double nx = 0, ny = 0, nz = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -94,6 +108,7 @@ void polygon_triangles(const Corner* corners, std::size_t n, const Position& pos
     convex = convex && !s.reflex[i];
   }
   if (convex) return fan();
+  if (n > kMaxClippedCorners) return !fan();
 
   s.prev.resize(n);
   s.next.resize(n);
@@ -139,6 +154,7 @@ void polygon_triangles(const Corner* corners, std::size_t n, const Position& pos
     tried = 0;
   }
   emit(Triangle{corners[s.prev[i]], corners[i], corners[s.next[i]]});
+  return false;
 }
 
 }  // namespace ocsimp::detail

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 #include <string>
@@ -265,6 +266,65 @@ TEST(Obj, PolygonsAreFanTriangulated) {
   ReadOptions split;
   split.split_corner_attributes = true;
   EXPECT_EQ(read_mesh(dir / "uv.obj", split).triangles.size(), 1u);
+}
+
+// Above 4,096 corners (kMaxClippedCorners) a concave polygon is fanned, as ear clipping would take quadratic
+// time; the fan covers ground outside it (a comb of 4,098 corners, 850 times its area), and the reader now
+// says so, once, with the count. Neither a concave polygon small enough to clip nor a large convex one draws
+// the note.
+TEST(Obj, ConcavePolygonsTooLargeToClipAreFannedWithAWarning) {
+  // A comb of `teeth` teeth (4 corners each) on a spine (2 more), as one face; or a convex n-gon.
+  // snprintf rather than string concatenation, which GCC 12's -Wrestrict misreads.
+  auto vertex = [](std::string& text, double x, double y) {
+    char line[64];
+    std::snprintf(line, sizeof line, "v %.17g %.17g 0\n", x, y);
+    text += line;
+  };
+  auto face = [](std::string& text, std::size_t n) {
+    text += "f";
+    for (std::size_t i = 1; i <= n; ++i) {
+      text += ' ';
+      text += std::to_string(i);
+    }
+    text += '\n';
+  };
+  auto comb = [&](std::size_t teeth) {
+    std::string text;
+    for (std::size_t i = 0; i < teeth; ++i) {
+      const double x = static_cast<double>(i);
+      vertex(text, x, 0), vertex(text, x, 10), vertex(text, x + 0.5, 10), vertex(text, x + 0.5, 0);
+    }
+    vertex(text, static_cast<double>(teeth), -1), vertex(text, 0, -1);
+    face(text, 4 * teeth + 2);
+    return text;
+  };
+  auto round = [&](std::size_t n) {
+    std::string text;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double a = 2 * M_PI * static_cast<double>(i) / static_cast<double>(n);
+      vertex(text, std::cos(a), std::sin(a));
+    }
+    face(text, n);
+    return text;
+  };
+  std::vector<std::string> told;
+  ReadOptions options;
+  options.warn = [&](const std::string& message) { told.push_back(message); };
+  TempDir dir;
+  for (const auto& [text, fanned] :
+       {std::pair{comb(1100), true}, std::pair{comb(1000), false}, std::pair{round(4106), false}}) {
+    told.clear();
+    test::write_file_bytes(dir / "p.obj", text);
+    const IndexedMesh m = read_mesh(dir / "p.obj", options);
+    EXPECT_EQ(m.face_count(), m.vertex_count() - 2);
+    if (fanned) {
+      EXPECT_EQ(told, std::vector<std::string>{
+                          "1 concave polygon has more than 4096 corners and was fanned from "
+                          "the first corner: some triangles cover ground outside the polygon"});
+    } else {
+      EXPECT_TRUE(told.empty()) << told[0];
+    }
+  }
 }
 
 // A concave polygon's fan covers ground outside it: an L's fan from its inner corner's neighbour reached over
