@@ -50,18 +50,14 @@ void take_first_corner(std::vector<std::uint8_t>& state, std::vector<T>& values,
   }
 }
 
-// What ReadOptions::warn is told when `vertices` of them had a floating-point color channel outside [0, 1]
-// (clamped): some writers put 0..255 there, and every such color came out white without a word.
-inline std::string clamped_colors_note(std::uint64_t vertices) {
+// What ReadOptions::warn is told when `vertices` of them had a color channel outside its span, clamped:
+// [0, 1] for floating point, where some writers put 0..255 and every such color came out white without a
+// word; 0..255 for a PLY's `integer` types but ushort.
+inline std::string clamped_colors_note(std::uint64_t vertices, bool integer = false) {
   return std::to_string(vertices) + (vertices == 1 ? " vertex has" : " vertices have") +
-         " a floating-point color channel outside 0..1, clamped to it (are the colors on a 0..255 scale?)";
-}
-
-// The same for a PLY's integer color channels outside 0..255 (but for ushort's 0..65535, see the PLY
-// reader's byte_scale_color).
-inline std::string clamped_integer_colors_note(std::uint64_t vertices) {
-  return std::to_string(vertices) + (vertices == 1 ? " vertex has" : " vertices have") +
-         " an integer color channel outside 0..255, clamped to it";
+         (integer ? " an integer color channel outside 0..255, clamped to it"
+                  : " a floating-point color channel outside 0..1, clamped to it (are the colors on a 0..255 "
+                    "scale?)");
 }
 
 // What ReadOptions::warn is told when face corners gave vertices different texture coordinates

@@ -137,17 +137,16 @@ std::pair<std::int64_t, std::int64_t> integer_range(PlyType type) {
   return {INT64_MIN, INT64_MAX};
 }
 
-// Whether a color channel of this type spans 0..255: every integer type but ushort. Unsigned 16 bits is the
-// one wider integer encoding of color in use (16-bit PNG and TIFF channels), and spans 0..65535; the other
-// integer types turn up where a writer stores every number as one type, with 0..255 in them (read over the
-// type's range, an int's 255 came out black). Floating-point colors span [0, 1].
-bool byte_scale_color(PlyType type) {
-  return ply_type_is_integer(type) && type != PlyType::uint16;
+// The value that means full intensity in a color channel of this type: 65535 for ushort, the one wider
+// integer encoding of color in use (16-bit PNG and TIFF channels); 255 for every other integer type, which
+// turns up where a writer stores every number as one type, with 0..255 in it (read over the type's range,
+// an int's 255 came out black); 1 for floating point.
+double color_span(PlyType type) {
+  return !ply_type_is_integer(type) ? 1.0 : type == PlyType::uint16 ? 65535.0 : 255.0;
 }
 
 std::uint8_t color_channel(double value, PlyType type) {
-  if (byte_scale_color(type)) return static_cast<std::uint8_t>(std::clamp(value, 0.0, 255.0));
-  const double unit = type == PlyType::uint16 ? value / 65535.0 : value;
+  const double unit = value / color_span(type);
   if (!(unit > 0.0)) return 0;
   if (unit >= 1.0) return 255;
   return static_cast<std::uint8_t>(std::lround(unit * 255.0));
@@ -201,7 +200,7 @@ std::size_t scan_points(const float* xyz, std::size_t n, float* lo, float* hi) {
 
 enum class Slot : std::uint8_t { none, x, y, z, nx, ny, nz, red, green, blue, alpha, u, v };
 
-// What color_check says of a color channel outside its type's span (see byte_scale_color).
+// What color_check says of a color channel outside its type's span (color_span).
 enum class ColorCheck : std::uint8_t { in_range, clamped, not_finite };
 
 struct VertexValues {
@@ -231,11 +230,10 @@ void set_value(VertexValues& values, Slot slot, PlyType type, double value) {
     case Slot::blue:
     case Slot::alpha:
       values.color[int(slot) - int(Slot::red)] = color_channel(value, type);
-      values.color_check[int(slot) - int(Slot::red)] =
-          type == PlyType::uint16 || (value >= 0.0 && value <= (byte_scale_color(type) ? 255.0 : 1.0))
-              ? ColorCheck::in_range
-          : std::isfinite(value) ? ColorCheck::clamped
-                                 : ColorCheck::not_finite;
+      values.color_check[int(slot) - int(Slot::red)] = value >= 0.0 && value <= color_span(type)
+                                                           ? ColorCheck::in_range
+                                                       : std::isfinite(value) ? ColorCheck::clamped
+                                                                              : ColorCheck::not_finite;
       break;
     case Slot::u:
     case Slot::v:
@@ -411,7 +409,7 @@ class PlyStream final : public TriangleStream {
   // What the file holds that no output keeps (unread_note, colors finer than 8 bits), said once every face is
   // read: a file that then fails got the warning and its error both.
   std::vector<std::string> notes_at_end_;
-  std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside its span (byte_scale_color)
+  std::uint64_t clamped_colors_ = 0;  // vertices with a color channel outside its color_span
   std::uint64_t concave_fans_ = 0;    // polygons polygon_triangles fanned though concave
   bool integer_colors_ = false;       // the red channel's type is an integer, for the note on clamped ones
   std::function<void(const VertexChunk&)> vertex_sink_;  // out of core: vertices go there, not kept
@@ -605,7 +603,7 @@ PlyStream::PlyStream(const std::string& path, const ReadOptions& options)
       const PlyType type = vertex_element.properties[i].type;
       if (vertex_plan_.slots[i] != Slot::red) continue;
       integer_colors_ = ply_type_is_integer(type);
-      if (!byte_scale_color(type)) {
+      if (color_span(type) != 255.0) {
         notes_at_end_.push_back(std::string("its colors, stored as ") + ply_type_name(type) +
                                 ", are kept to 8 bits a channel, as every output writes them");
       }
@@ -973,8 +971,7 @@ void PlyStream::load_vertices() {
     flush_vertices();
   }
   if (warn_ && clamped_colors_ > 0) {
-    warn_(integer_colors_ ? clamped_integer_colors_note(clamped_colors_)
-                          : clamped_colors_note(clamped_colors_));
+    warn_(clamped_colors_note(clamped_colors_, integer_colors_));
   }
   report_progress();
 }
