@@ -70,11 +70,12 @@ void fan_triangles(const Corner* corners, std::size_t n, const Emit& emit) {
 template <class Corner, class Position, class Emit>
 bool polygon_triangles(const Corner* corners, std::size_t n, const Position& position, PolygonScratch& s,
                        const Emit& emit) {
-  auto fan = [&] {
+  // Fans the polygon; returns `concave`, what polygon_triangles returns then.
+  auto fan = [&](bool concave) {
     fan_triangles(corners, n, emit);
-    return false;
+    return concave;
   };
-  if (n <= 3) return fan();
+  if (n <= 3) return fan(false);
   // Newell's normal of the polygon; its largest axis is dropped to work in the plane.
   double nx = 0, ny = 0, nz = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -85,7 +86,7 @@ bool polygon_triangles(const Corner* corners, std::size_t n, const Position& pos
     nz += (double(a.x()) - b.x()) * (double(a.y()) + b.y());
   }
   const double ax = std::abs(nx), ay = std::abs(ny), az = std::abs(nz);
-  if (!(ax + ay + az > 0)) return fan();
+  if (!(ax + ay + az > 0)) return fan(false);
   const int drop = ax >= ay && ax >= az ? 0 : ay >= az ? 1 : 2;
   const double sign = (drop == 0 ? nx : drop == 1 ? ny : nz) > 0 ? 1.0 : -1.0;
   s.x.resize(n);
@@ -107,8 +108,8 @@ bool polygon_triangles(const Corner* corners, std::size_t n, const Position& pos
     s.reflex[i] = turn(i == 0 ? n - 1 : i - 1, i, i + 1 == n ? 0 : i + 1) < 0;
     convex = convex && !s.reflex[i];
   }
-  if (convex) return fan();
-  if (n > kMaxClippedCorners) return !fan();
+  if (convex) return fan(false);
+  if (n > kMaxClippedCorners) return fan(true);
 
   s.prev.resize(n);
   s.next.resize(n);
