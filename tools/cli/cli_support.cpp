@@ -418,7 +418,10 @@ void check_whole_mesh_fits(const std::vector<std::string>& paths, double bytes_p
     try {
       const std::uint64_t claimed = detect_format(paths[i]) == FileFormat::ply ? triangles_hint(paths[i]) : 0;
       faces += claimed;
-      if (claimed > most) most = claimed, largest = i;
+      if (claimed > most) {
+        most = claimed;
+        largest = i;
+      }
     } catch (const Error&) {
       // The reader reports it.
     }

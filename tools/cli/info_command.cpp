@@ -73,16 +73,14 @@ void add_info_command(CLI::App& app) {
     // Enough digits to tell the box's sides apart however far from zero it lies, up to what a double holds:
     // six, and one more for each decade its coordinates exceed its extent by (a float STL 2 wide at UTM
     // northings printed as "(499999, 4e+06, 98.963) .. (500001, 4e+06, 101.031)").
-    int digits = 6;
-    if (!box.empty()) {
-      const double magnitude = std::max(box.lo.cwiseAbs().maxCoeff(), box.hi.cwiseAbs().maxCoeff());
-      const double extent = box.extent().maxCoeff();
-      if (extent > 0 && magnitude > extent)
-        digits = std::min(17, 6 + static_cast<int>(std::floor(std::log10(magnitude / extent))));
-    }
     if (box.empty()) {
       std::printf("  bounding box           none (no vertex)\n");  // as --json's null, not inf .. -inf
     } else {
+      const double magnitude = std::max(box.lo.cwiseAbs().maxCoeff(), box.hi.cwiseAbs().maxCoeff());
+      const double extent = box.extent().maxCoeff();
+      const int digits = extent > 0 && magnitude > extent
+                             ? std::min(17, 6 + static_cast<int>(std::floor(std::log10(magnitude / extent))))
+                             : 6;
       std::printf("  bounding box           (%.*g, %.*g, %.*g) .. (%.*g, %.*g, %.*g)\n", digits, box.lo.x(),
                   digits, box.lo.y(), digits, box.lo.z(), digits, box.hi.x(), digits, box.hi.y(), digits,
                   box.hi.z());
