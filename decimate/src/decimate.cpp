@@ -1894,6 +1894,111 @@ struct Decimator {
     return false;
   }
 
+  // Whether a and b are two corners of a tetrahedron that is a whole component: four faces on four vertices,
+  // each in three faces (dying: the two on the edge); its corners go to `corners`, a and b first. What a
+  // small closed part (a scan's floating debris, a bolt's head) decimates down to, and where it stuck: any
+  // collapse doubles its two other faces (doubles_a_face). 2,000 tiny tetrahedra beside a sphere, decimated
+  // to 2,000 faces, kept their 8,000 faces and left the sphere 4 faces, at 6.95 % Hausdorff.
+  bool lone_tetrahedron(Index a, Index b, Index corners[4]) const {
+    if (dying.size() != 2 || fa.size() != 3 || fb.size() != 3) return false;
+    corners[0] = a;
+    corners[1] = b;
+    for (int i = 0; i < 2; ++i) {
+      const Face& t = faces[dying[i]];
+      corners[2 + i] = t.v[0] != a && t.v[0] != b ? t.v[0] : t.v[1] != a && t.v[1] != b ? t.v[1] : t.v[2];
+    }
+    if (corners[2] == corners[3]) return false;
+    for (int i = 0; i < 4; ++i) {
+      if (verts[corners[i]].live_faces != 3 || locked(corners[i])) return false;
+    }
+    // a's and b's third faces must be (a, c, d) and (b, c, d): then c's and d's three faces are all here.
+    for (const std::vector<Index>* list : {&fa, &fb}) {
+      for (Index f : *list) {
+        for (Index x : faces[f].v) {
+          if (x != a && x != b && x != corners[2] && x != corners[3]) return false;
+        }
+      }
+    }
+    return true;
+  }
+
+  // Removes a lone tetrahedron (see lone_tetrahedron) found at the top pair e, whose queue key is `queued`,
+  // charged as the collapse of all four corners to the centroid of its surface: the larger of their summed
+  // quadric there and the area they stand for times the mean squared distance from the tetrahedron's
+  // surface to that point. The quadric alone measures distance to planes, which a small closed part is
+  // close to everywhere inside it: charged by it, 2,000 small tetrahedra beside a sphere of 47,600 faces
+  // went at 9,000 faces, at ten times the RMS distance of keeping them. When the charge is above the pair's
+  // key, the pair first goes back to the queue at it. A part far from the rest leaves a gap of that
+  // distance, which no local charge sees; --preserve-topology keeps every part.
+  void remove_tetrahedron(Index e, const Index corners[4], float queued, std::uint64_t short_allowed) {
+    if (!fits_targets(4, 4, short_allowed)) {
+      heap.remove(e, kDeferred);
+      deferred.push_back(e);
+      return;
+    }
+    decimate_detail::RawQuadric q{};
+    double area = 0;
+    Vec3d at[4];
+    for (int i = 0; i < 4; ++i) {
+      const Vertex& v = verts[corners[i]];
+      q = {q.a00 + v.q.a00, q.a01 + v.q.a01, q.a02 + v.q.a02, q.a11 + v.q.a11, q.a12 + v.q.a12,
+           q.a22 + v.q.a22, q.b0 + v.q.b0,   q.b1 + v.q.b1,   q.b2 + v.q.b2,   q.c + v.q.c};
+      area += v.area;
+      at[i] = rel(corners[i]);
+    }
+    // The surface's centroid and its second moment about it, face by face: over a triangle with corners
+    // x, y, z (relative to the point), the integral of |p|^2 is its area / 6 times (|x|^2 + |y|^2 + |z|^2 +
+    // x.y + y.z + z.x).
+    static constexpr int kFaces[4][3] = {{0, 1, 2}, {0, 1, 3}, {0, 2, 3}, {1, 2, 3}};
+    double surface = 0;
+    Vec3d centroid = Vec3d::Zero();
+    for (const auto& f : kFaces) {
+      const double a = 0.5 * (at[f[1]] - at[f[0]]).cross(at[f[2]] - at[f[0]]).norm();
+      surface += a;
+      centroid += a / 3 * (at[f[0]] + at[f[1]] + at[f[2]]);
+    }
+    if (surface > 0) centroid /= surface;
+    double moment = 0;
+    for (const auto& f : kFaces) {
+      const Vec3d x = at[f[0]] - centroid, y = at[f[1]] - centroid, z = at[f[2]] - centroid;
+      const double a = 0.5 * (y - x).cross(z - x).norm();
+      moment +=
+          a / 6 * (x.squaredNorm() + y.squaredNorm() + z.squaredNorm() + x.dot(y) + y.dot(z) + z.dot(x));
+    }
+    const double mean_square = surface > 0 ? moment / surface : 0.0;
+    const double weight = area * area_unit;
+    const double cost = std::max(decimate_detail::evaluate(q, centroid), weight * mean_square);
+    const double error = error_distance(cost, weight);
+    if (error > opt.max_error) {
+      heap.remove(e, kIdleError);
+      return;
+    }
+    const float key = key_of(cost, trace(q));
+    if (key > queued) {
+      heap.update(e, key);
+      if (heap.top().edge != e) return;
+    }
+    for (const std::vector<Index>* list : {&fa, &fb}) {
+      for (Index f : *list) {
+        Face& t = faces[f];
+        if (t.v[0] == kNone) continue;  // one of the dying faces, met again in b's list
+        for (Index id : t.e) {
+          if (!edge_dead(id)) kill(id);
+        }
+        t.v[0] = kNone;
+      }
+    }
+    for (int i = 0; i < 4; ++i) {
+      verts[corners[i]].live_faces = 0;
+      if (!virtual_pairs.empty()) drop_virtual_pairs(corners[i]);
+    }
+    faces_alive -= 4;
+    verts_alive -= 4;
+    stats.max_error = std::max(stats.max_error, error);
+    applied_key = std::max(applied_key, key);
+    ++stats.collapses;
+  }
+
   // Whether a collapse removing kf faces and kv vertices stays within the count targets. The last faces are
   // never removed, whatever the targets: an error bound alone (a flat square at --max-error 1, a single
   // triangle at cost 0 without border planes) or a vertex target below 3 took every face, and an empty mesh
@@ -2118,7 +2223,17 @@ struct Decimator {
       return;
     }
     double worst_quality = 1, longest2 = 0;
-    if (doubles_a_face(a, b) || !shapes_ok(a, b, pl.point, &worst_quality, &longest2)) {
+    if (doubles_a_face(a, b)) {
+      Index corners[4];
+      if (!opt.preserve_topology && lone_tetrahedron(a, b, corners)) {
+        remove_tetrahedron(e, corners, queued, short_allowed);
+        return;
+      }
+      ++stats.rejected_flip;
+      block(e, kBlockedFlip);
+      return;
+    }
+    if (!shapes_ok(a, b, pl.point, &worst_quality, &longest2)) {
       ++stats.rejected_flip;
       block(e, kBlockedFlip);
       return;

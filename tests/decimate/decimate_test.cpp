@@ -727,10 +727,12 @@ TEST(Decimate, ADoubledFaceIsNeverMade) {
   IndexedMesh tetrahedron;
   tetrahedron.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   tetrahedron.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  // The last faces stay (see SmallClosedPartsVanishWhereTheTargetNeedsTheirFaces for a tetrahedron that is
+  // not the whole mesh).
   const DecimateResult tiny = run(tetrahedron, faces(2));
   EXPECT_EQ(tiny.mesh.face_count(), 4u);
   EXPECT_EQ(tiny.stats.stop, DecimateStop::blocked);
-  EXPECT_NE(tiny.stats.reason.find("double a triangle"), std::string::npos) << tiny.stats.reason;
+  EXPECT_NE(tiny.stats.reason.find("would remove the last faces"), std::string::npos) << tiny.stats.reason;
   const IndexedMesh ring = torus(12, 6);
   for (std::uint64_t target : {60u, 30u, 16u, 10u}) {
     const DecimateResult r = run(ring, faces(target));
@@ -743,6 +745,50 @@ TEST(Decimate, ADoubledFaceIsNeverMade) {
     EXPECT_EQ(doubled_faces(r.mesh), 0u) << target;
     EXPECT_GE(r.mesh.face_count(), std::max<std::uint64_t>(target - 1, 4)) << target;
   }
+}
+
+// Small closed parts (a scan's floating debris) decimate down to tetrahedra, where every collapse would
+// double a face. They stayed, so a target below four faces a part was met by taking the main surface
+// instead: 150 octahedra beside a sphere, decimated to 400 faces, stopped at 604 with the sphere a
+// tetrahedron. A tetrahedron that is a whole component now goes at once, charged as its collapse to a point.
+TEST(Decimate, SmallClosedPartsVanishWhereTheTargetNeedsTheirFaces) {
+  IndexedMesh mesh = test::sphere(4);
+  const std::uint64_t sphere_faces = mesh.face_count();
+  const double golden = M_PI * (3 - std::sqrt(5.0));
+  constexpr int kParts = 150;
+  constexpr float kSize = 0.02f;
+  for (int i = 0; i < kParts; ++i) {
+    const double z = 1 - (i + 0.5) * 2 / kParts, r = std::sqrt(1 - z * z);
+    const Vec3f centre =
+        1.5f * Vec3f(float(r * std::cos(golden * i)), float(r * std::sin(golden * i)), float(z));
+    const Index base = static_cast<Index>(mesh.positions.size());
+    for (const Vec3f& d :
+         {Vec3f(1, 0, 0), Vec3f(-1, 0, 0), Vec3f(0, 1, 0), Vec3f(0, -1, 0), Vec3f(0, 0, 1), Vec3f(0, 0, -1)})
+      mesh.positions.push_back(centre + kSize * d);
+    for (const Triangle& t : std::initializer_list<Triangle>{
+             {0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}})
+      mesh.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  }
+  ASSERT_EQ(analyze_topology(mesh).components, kParts + 1u);
+
+  const DecimateResult r = run(mesh, faces(400));
+  EXPECT_EQ(r.mesh.face_count(), 400u);
+  EXPECT_TRUE(r.stats.target_reached);
+  // Every part is gone and the sphere is whole: every vertex left lies near the unit sphere.
+  EXPECT_EQ(analyze_topology(r.mesh).components, 1u);
+  for (const Vec3f& p : r.mesh.positions) EXPECT_NEAR(p.norm(), 1.0, 0.05);
+  EXPECT_EQ(doubled_faces(r.mesh), 0u);
+
+  // Parts go only as the target needs: above the sphere and four faces a part, none does.
+  const DecimateResult roomy = run(mesh, faces(sphere_faces / 2 + 4 * kParts));
+  EXPECT_EQ(analyze_topology(roomy.mesh).components, kParts + 1u);
+
+  // With the link condition no part vanishes: each keeps its four faces.
+  DecimateOptions keep = faces(400);
+  keep.preserve_topology = true;
+  const DecimateResult kept = run(mesh, keep);
+  EXPECT_EQ(analyze_topology(kept.mesh).components, kParts + 1u);
+  EXPECT_GE(kept.mesh.face_count(), 4u * (kParts + 1));
 }
 
 TEST(Decimate, ADoubledFaceIsNeverMadeOnAScan) {
