@@ -1698,51 +1698,60 @@ FineCells accumulate_soup(TriangleStream& stream, const PassOptions& options) {
   std::vector<CellKey>& keys = seen.keys;
   CellStore<std::int32_t>& store = seen.store;
 
-  // Number the cells in Morton order.
+  // Number the cells in Morton order. Each array moves into that order and is freed before the next one
+  // moves, and the triangles are renumbered before any sum moves: with every array copied at once, beside
+  // the triangles' set, gen 1 M clustered out of core on a grid of 1024 (501 k cells) peaked at 284 MB.
   const std::size_t count = keys.size();
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries(count);
-  for (std::size_t i = 0; i < count; ++i) entries[i] = {morton(keys[i]), static_cast<std::uint32_t>(i)};
-  tbb::parallel_sort(entries.begin(), entries.end());
-  cells.keys.resize(count);
-  CellStore<std::int32_t> sorted;
-  sorted.quadrics.resize(count);
-  if (options.boundary) cells.border.resize(count);
-  sorted.points.resize(count);
-  sorted.point_sum.resize(count);
-  sorted.point_box.resize(count);
-  const AttributeSums& attributes = seen.attributes;
-  attributes.size_cells(cells, count);
-  CellMap numbering(count);
-  for (std::size_t i = 0; i < count; ++i) {
-    const std::uint32_t from = entries[i].second;
-    cells.keys[i] = keys[from];
-    sorted.quadrics[i] = store.quadrics[from];
-    if (options.boundary) {
-      cells.border[i].exact = store.exact[from];
-      add_wrapping(cells.border[i].crease, store.crease[from]);
-    }
-    sorted.points[i] = store.points[from];
-    sorted.point_sum[i] = store.point_sum[from];
-    sorted.point_box[i] = store.point_box[from];
-    attributes.add_to(cells, static_cast<std::uint32_t>(i), from);
-    bool inserted;
-    numbering.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);
+  std::vector<std::uint32_t> order(count);
+  {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> entries(count);
+    for (std::size_t i = 0; i < count; ++i) entries[i] = {morton(keys[i]), static_cast<std::uint32_t>(i)};
+    tbb::parallel_sort(entries.begin(), entries.end());
+    for (std::size_t i = 0; i < count; ++i) order[i] = entries[i].second;
   }
-  entries = {};
-  keys = {};
-  store = {};
-  seen.attributes = {};
-  std::vector<CellTriple<CellKey>> triples;
-  survivors.drain_into(triples);
-  for (const CellTriple<CellKey>& k : triples) {
-    const std::uint32_t a = numbering.find(k.first()), b = numbering.find(k.second()),
-                        c = numbering.find(k.third());
-    CellTriangle t3 = CellTriangle::of(a, b, c);
-    if (!k.seen_forward()) t3 = CellTriangle::of(a, c, b);
-    if (k.seen_forward() && k.seen_reversed()) t3.merge_flags(CellTriangle::of(a, c, b));
-    cells.triangles.push_back(t3);
+  // Fills `to` with `from` in Morton order and frees `from`.
+  auto reorder = [&](auto& to, auto& from, auto&& assign) {
+    to.resize(count);
+    tbb::parallel_for(std::size_t{0}, count, [&](std::size_t i) { assign(to[i], from[order[i]]); });
+    std::remove_reference_t<decltype(from)>().swap(from);
+  };
+  auto copy = [](auto& to, const auto& from) { to = from; };
+  reorder(cells.keys, keys, copy);
+  {
+    CellMap numbering(count);
+    for (std::size_t i = 0; i < count; ++i) {
+      bool inserted;
+      numbering.insert(cells.keys[i], static_cast<std::uint32_t>(i), inserted);
+    }
+    std::vector<CellTriple<CellKey>> triples;
+    survivors.drain_into(triples);
+    cells.triangles.reserve(triples.size());
+    for (const CellTriple<CellKey>& k : triples) {
+      const std::uint32_t a = numbering.find(k.first()), b = numbering.find(k.second()),
+                          c = numbering.find(k.third());
+      CellTriangle t3 = CellTriangle::of(a, b, c);
+      if (!k.seen_forward()) t3 = CellTriangle::of(a, c, b);
+      if (k.seen_forward() && k.seen_reversed()) t3.merge_flags(CellTriangle::of(a, c, b));
+      cells.triangles.push_back(t3);
+    }
   }
   tbb::parallel_sort(cells.triangles.begin(), cells.triangles.end());
+  CellStore<std::int32_t> sorted;
+  reorder(sorted.quadrics, store.quadrics, copy);
+  if (options.boundary) {
+    cells.border.resize(count);
+    reorder(cells.border, store.exact, [](BorderSums& to, const ExactSums& from) { to.exact = from; });
+    reorder(cells.border, store.crease,
+            [](BorderSums& to, const CreaseSums<std::int32_t>& from) { add_wrapping(to.crease, from); });
+  }
+  reorder(sorted.points, store.points, copy);
+  reorder(sorted.point_sum, store.point_sum, copy);
+  reorder(sorted.point_box, store.point_box, copy);
+  store = {};
+  const AttributeSums& attributes = seen.attributes;
+  attributes.size_cells(cells, count);
+  for (std::size_t i = 0; i < count; ++i) attributes.add_to(cells, static_cast<std::uint32_t>(i), order[i]);
+  seen.attributes = {};
   sorted.move_into(cells);
   return cells;
 }
