@@ -64,8 +64,9 @@ void add_cluster_command(CLI::App& app) {
          "--memory-limit", flags->memory_limit,
          "Bytes the input's vertex array may take, e.g. 2G (default: a third of RAM, or half of "
          "`ulimit -v` where less); a larger one "
-         "is dereferenced on disk under TMPDIR and its faces clustered as triangle soups (with a face "
-         "or vertex target, only where that takes less memory than staying in core)")
+         "is dereferenced on disk under TMPDIR and its faces clustered as triangle soups (with a target "
+         "or --grid, only where that takes less memory than staying in core); a warning says when the "
+         "run's peak went over it")
       ->check(byte_size());
   cmd->add_option("--threads", flags->options.threads,
                   "Threads (0 = all cores); the output does not depend on it")
@@ -97,9 +98,9 @@ void add_cluster_command(CLI::App& app) {
     ReadOptions read;
     read.progress = progress;
     read.warn = console.warn;
-    read.memory_budget = cluster_vertex_allowance(
-        options,
-        effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit)));
+    const std::uint64_t memory_limit =
+        effective_memory_limit(flags->memory_limit.empty() ? 0 : parse_byte_size(flags->memory_limit));
+    read.memory_budget = cluster_vertex_allowance(options, memory_limit);
     std::unique_ptr<TriangleStream> stream = open_triangle_stream(flags->input, read);
     const bool out_of_core = dereferenced_out_of_core(*stream);
     // Out of core the clustering sees corners, not the file's vertex array: the count comes from the stream.
@@ -122,6 +123,7 @@ void add_cluster_command(CLI::App& app) {
     write_result(flags->output, result.mesh, write);
     const double write_seconds = seconds_since(write_start);
     const double total_seconds = seconds_since(start);
+    warn_if_over_memory_limit(console, memory_limit);
 
     if (!flags->report.empty()) {
       nlohmann::json report;

@@ -43,6 +43,13 @@ constexpr double kLevelMargin = 2.0;
 // they outgrow twice the plan, which leaves up to twice the planned number, as the indexed pass's level
 // choice does.
 constexpr double kSoupClusterBytesPerCell = 1800.0;
+// The same on a given grid (--grid), where the pass neither refines nor coarsens: 740 bytes a cell at 68 k
+// cells, 460 at 2 M (gen 4 M), taken at the high end.
+constexpr double kSoupGridBytesPerCell = 740.0;
+// The most cells a surface occupies on a grid of n cells along its box's longest axis, in units of n^2: a
+// closed blob takes about 4 (gen's, at n = 128 and 256), a sphere pi, a plane across the box 1 to 3; a scan
+// of a folded statue more.
+constexpr double kGridSurfaceCells = 16.0;
 // What the process holds before it reads anything (code, libraries, thread pools; about 9 MB measured here)
 // as the plan counts it: a constant, as the plan and so the output must not depend on the run (the measured
 // size grows from one run to the next in a process, and with the threads).
@@ -129,12 +136,38 @@ std::uint64_t vertex_allowance(const std::string& input_path, const SimplifyOpti
   return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(allowance));
 }
 
+// The most memory the process can hold: the machine's (or its container's), and half its address-space
+// limit (ulimit -v) where it has one, as code, thread stacks and the allocator's arenas take address space
+// too.
+std::uint64_t memory_room() {
+  const std::uint64_t physical = physical_memory_bytes(), address_space = address_space_limit();
+  return address_space > 0 ? std::min(physical, address_space / 2) : physical;
+}
+
 }  // namespace
 
 std::uint64_t cluster_vertex_allowance(const ClusterOptions& options, std::uint64_t budget) {
-  const auto cells = static_cast<double>(planned_fine_cells(options));
-  const double indexed = kLevelMargin * pass_bytes_per_cell(false, false, false) * cells;
-  const double allowance = std::max(static_cast<double>(budget), kSoupClusterBytesPerCell * cells - indexed);
+  auto cells = static_cast<double>(planned_fine_cells(options));
+  double indexed = kLevelMargin * pass_bytes_per_cell(false, false, false) * cells;
+  double soup = kSoupClusterBytesPerCell * cells;
+  if (cells == 0 && !(options.cell_size > 0)) {
+    // --grid: no plan, but the grid bounds the cells a surface can occupy. The in-core pass's cells cost
+    // about 280 bytes, the soup's 460-740 (gen 1 M and 4 M on grids of 128 to 1024), so out of core pays only
+    // for a grid coarse against the input: gen 4 M on --grid 128 peaked at 53 MiB in core and 60 out of
+    // core. Counted at the most a surface takes, staying in core costs at most its vertex array too many;
+    // counted too few, the soup's cells could cost many times that (`--grid 4096 --memory-limit 50M` took
+    // gen 20 M from 2.6 GB in core to 5.8 GB out of core).
+    cells = kGridSurfaceCells * static_cast<double>(options.grid) * static_cast<double>(options.grid);
+    indexed = kPassBytesPerCell * cells;
+    soup = kSoupGridBytesPerCell * cells;
+  }
+  // A --cell-size grid's cells are unknown until its pass has found the box, and the vertex array is over
+  // the budget for certain in core: out of core is then the one way to keep it.
+  double allowance = std::max(static_cast<double>(budget), soup - indexed);
+  // Never more than half of what the machine can hold (nor less than the limit asked for): an array larger
+  // than that leaves no room for the cells beside it.
+  allowance =
+      std::max(static_cast<double>(budget), std::min(allowance, 0.5 * static_cast<double>(memory_room())));
   return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::min(allowance, 1.8e19)));
 }
 
@@ -163,14 +196,6 @@ struct FirstStage {
   std::uint64_t target_faces = 0;
   double target_ratio = 0;
 };
-
-// The most memory the process can hold: the machine's (or its container's), and half its address-space
-// limit (ulimit -v) where it has one, as code, thread stacks and the allocator's arenas take address space
-// too.
-std::uint64_t memory_room() {
-  const std::uint64_t physical = physical_memory_bytes(), address_space = address_space_limit();
-  return address_space > 0 ? std::min(physical, address_space / 2) : physical;
-}
 
 FirstStage first_stage(const std::string& input_path, const SimplifyOptions& options) {
   FirstStage stage;
