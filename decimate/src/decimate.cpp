@@ -2826,7 +2826,8 @@ struct Decimator {
       });
       done = 0;
       for (const auto& w : workers) done += w->stats.collapses;
-      report(opt.progress, "decimate", stats.collapses + done, std::max(expected, stats.collapses + done));
+      report(opt.progress, "decimate", stats.collapses + done,
+             progress_total(expected, stats.collapses + done));
       if (threshold == std::numeric_limits<float>::infinity()) break;
     }
 
@@ -2855,6 +2856,12 @@ struct Decimator {
 
   // The collapses of a round's regions, added up across threads as they go and reported by whichever
   // thread finds no other reporting: a round of a large mesh's regions can take seconds.
+  // The total a progress report gives once `done` collapses are done of `expected`: never below what is
+  // done, and 0 without a count target (only max_error), where a total of what is done read as finished.
+  static std::uint64_t progress_total(std::uint64_t expected, std::uint64_t done) {
+    return expected == 0 ? 0 : std::max(expected, done);
+  }
+
   struct RoundProgress {
     RoundProgress(const ProgressFn& f, std::uint64_t b, std::uint64_t e) : fn(f), before(b), expected(e) {}
     const ProgressFn& fn;
@@ -2865,7 +2872,7 @@ struct Decimator {
     void add(std::uint64_t collapses) {
       const std::uint64_t now = done += collapses;
       if (!fn || !reporting.try_lock()) return;
-      report(fn, "decimate", before + now, std::max(expected, before + now));
+      report(fn, "decimate", before + now, progress_total(expected, before + now));
       reporting.unlock();
     }
   };
@@ -3103,11 +3110,13 @@ std::uint64_t ratio_target(double ratio, std::uint64_t faces) {
   // A cast of a NaN, a negative or an out-of-range product to an integer is undefined.
   if (!(ratio > 0 && ratio <= 1)) {
     char text[64];
-    std::snprintf(text, sizeof text, "%g", ratio);
+    std::snprintf(text, sizeof text, "%.17g", ratio);
     throw Error(std::string("a ratio must be in (0, 1], not ") + text);
   }
-  return std::max<std::uint64_t>(
-      1, static_cast<std::uint64_t>(std::llround(ratio * static_cast<double>(faces))));
+  // In doubles, not through llround's signed 64 bits: a count past 2^63 came back as 2^63.
+  const double target = std::round(ratio * static_cast<double>(faces));
+  if (target >= static_cast<double>(faces)) return faces;
+  return std::max<std::uint64_t>(1, static_cast<std::uint64_t>(target));
 }
 
 std::string separate_faces_note(const DecimateStats& stats, bool welded) {
@@ -3164,19 +3173,26 @@ const char* stop_name(DecimateStop stop) {
 }
 
 DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
+  // The values first, then whether they stop anything: a ratio of -0.5 or a NaN bound read as "no stopping
+  // criterion".
+  if (options.target_ratio != 0 && !(options.target_ratio > 0 && options.target_ratio <= 1)) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%.17g", options.target_ratio);
+    throw Error(std::string("decimate: the ratio must be in (0, 1], got ") + text);
+  }
+  if (!(options.max_error >= 0)) throw Error("decimate: the maximum error must be a distance >= 0");
+  // Finite too: an infinite border weight made every border quadric infinite, the reported error smaller
+  // than the real one, and the output quadrics unusable for a next level; an infinite attribute weight times
+  // a zero difference is NaN.
+  auto finite = [](double x) { return x >= 0 && x < std::numeric_limits<double>::infinity(); };
+  if (!finite(options.pair_distance) || !finite(options.boundary_weight) || !finite(options.shape_weight) ||
+      !finite(options.attribute_weight)) {
+    throw Error("decimate: the pair distance and the weights must be finite and >= 0");
+  }
+  if (!input.mesh.origin.allFinite()) throw Error("decimate: the mesh's origin is not a finite point");
   const bool has_count = options.target_faces > 0 || options.target_vertices > 0 || options.target_ratio > 0;
   if (!has_count && !(options.max_error < std::numeric_limits<double>::infinity())) {
     throw Error("decimate: no stopping criterion (give a face, vertex or ratio target, or a maximum error)");
-  }
-  if (options.target_ratio < 0 || options.target_ratio > 1 || std::isnan(options.target_ratio)) {
-    throw Error("decimate: the ratio must be in (0, 1], got " + std::to_string(options.target_ratio));
-  }
-  if (std::isnan(options.max_error) || options.max_error < 0) {
-    throw Error("decimate: the maximum error must be a distance >= 0");
-  }
-  if (!(options.pair_distance >= 0) || !(options.boundary_weight >= 0) || !(options.shape_weight >= 0) ||
-      !(options.attribute_weight >= 0)) {
-    throw Error("decimate: pair distance and weights must be >= 0");
   }
   Storage storage;
   Decimator d(options, storage);

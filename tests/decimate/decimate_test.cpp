@@ -1713,6 +1713,10 @@ TEST(Decimate, RatioTargetsRoundAndRejectBadRatios) {
   EXPECT_EQ(ratio_target(0.005, 69'451), 347u);
   EXPECT_EQ(ratio_target(1e-9, 100), 1u);  // never 0
   EXPECT_EQ(ratio_target(1.0, 101), 101u);
+  // Past 2^63 faces the rounding went through a signed 64-bit value and came back as 2^63.
+  constexpr std::uint64_t most = std::numeric_limits<std::uint64_t>::max();
+  EXPECT_EQ(ratio_target(1.0, most), most);
+  EXPECT_EQ(ratio_target(0.25, most), std::uint64_t{1} << 62);
   for (double bad : {0.0, -1.0, 1.5, 1e300, std::numeric_limits<double>::quiet_NaN(),
                      std::numeric_limits<double>::infinity()})
     EXPECT_THROW(ratio_target(bad, 101), Error) << bad;
@@ -1751,6 +1755,57 @@ TEST(Decimate, RejectsBadInputWithAClearError) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("face 8"), std::string::npos) << e.what();
   }
+}
+
+// The options' values are checked before whether they stop anything, and every weight must be finite: an
+// infinite border weight ran, reported a third of bunny's real error and returned infinite quadrics.
+TEST(Decimate, RejectsOptionsItCannotHonour) {
+  auto message = [](const IndexedMesh& mesh, const DecimateOptions& o) {
+    try {
+      run(mesh, o);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const IndexedMesh square = test::grid_square(4);
+  for (double ratio : {-0.5, 1.0000001, std::numeric_limits<double>::quiet_NaN()}) {
+    DecimateOptions o;
+    o.target_ratio = ratio;
+    EXPECT_NE(message(square, o).find("the ratio must be in (0, 1]"), std::string::npos)
+        << message(square, o);
+  }
+  DecimateOptions nan_bound;
+  nan_bound.max_error = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(message(square, nan_bound).find("maximum error"), std::string::npos)
+      << message(square, nan_bound);
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int which = 0; which < 4; ++which) {
+    DecimateOptions o = faces(8);
+    (which == 0   ? o.boundary_weight
+     : which == 1 ? o.shape_weight
+     : which == 2 ? o.attribute_weight
+                  : o.pair_distance) = inf;
+    EXPECT_NE(message(square, o).find("finite"), std::string::npos) << which << ": " << message(square, o);
+  }
+  IndexedMesh lost = square;
+  lost.origin.x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(message(lost, faces(8)).find("origin"), std::string::npos) << message(lost, faces(8));
+}
+
+// With an error bound alone there is no count to expect: the total stays 0 until the run ends (it read as
+// done at every report).
+TEST(Decimate, ProgressHasNoTotalUnderAnErrorBoundAlone) {
+  DecimateOptions o;
+  o.max_error = 1e-3;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> reports;
+  o.progress = [&](std::string_view phase, std::uint64_t done, std::uint64_t total) {
+    if (phase == "decimate") reports.push_back({done, total});
+  };
+  run(test::sphere(6), o);  // 32,768 faces: the region phase reports too
+  ASSERT_GE(reports.size(), 3u);
+  for (std::size_t i = 0; i + 1 < reports.size(); ++i) EXPECT_EQ(reports[i].second, 0u) << i;
+  EXPECT_EQ(reports.back().first, reports.back().second);
 }
 
 // A face repeated in the same turn is left out; one in the opposite turn (the other side of a sheet) stays. A

@@ -123,7 +123,8 @@ struct DecimateOptions {
   // Threads for the setup and for the first decimation phase over spatial regions, on meshes of 16 Ki faces
   // or more (0: all cores). The result does not depend on it.
   int threads = 0;
-  // Collapses done out of collapses expected ("decimate" phase; total 0 when only max_error is given).
+  // Collapses done out of collapses expected ("decimate" phase; total 0 while only max_error is given, done
+  // out of done once the run ends). Phase "decimate: setup" reports the setup's steps first.
   ProgressFn progress;
 };
 
@@ -193,8 +194,10 @@ struct DecimateResult {
 // input order; normals, colors and uvs are carried and interpolated. Same input and options give the same
 // output for any thread count.
 //
-// Throws Error for a face index out of range, a non-finite position, attribute or quadric arrays whose size
-// is neither 0 nor the vertex count, no stopping criterion, or a ratio outside (0, 1].
+// Throws Error for a face index out of range, a non-finite position, normal, uv, quadric or origin, attribute,
+// quadric or area arrays whose size is neither 0 nor the vertex count (areas without quadrics too), no
+// stopping criterion, a ratio outside (0, 1], a NaN or negative max_error (infinity: no bound), or a pair
+// distance or weight that is negative or not finite.
 DecimateResult decimate(QuadricMesh input, const DecimateOptions& options);
 
 // The face target a ratio gives of `faces` faces, as DecimateOptions::target_ratio takes it: round(ratio *
