@@ -337,8 +337,9 @@ void write_drc(const std::string& path, const IndexedMesh& mesh, const WriteOpti
 
   AtomicFile file(path);
   file.write(buffer.data(), buffer.size());
-  file.commit();
+  // Before the commit: a callback that throws (a cancel) must leave no file behind.
   report(options.progress, "write", mesh.triangles.size(), mesh.triangles.size());
+  file.commit();
 }
 
 }  // namespace ocsimp::detail

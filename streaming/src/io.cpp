@@ -226,6 +226,8 @@ void write_mesh(const std::string& path, const IndexedMesh& mesh, const WriteOpt
     case FileFormat::drc:
       return detail::write_drc(path, mesh, options);
   }
+  // A value outside the enum (a cast): nothing was written, which must not pass for success.
+  throw Error(path, {}, "unknown output format " + std::to_string(static_cast<int>(format)));
 }
 
 }  // namespace ocsimp

@@ -792,8 +792,9 @@ void write_obj(const std::string& path, const IndexedMesh& mesh, const WriteOpti
     file.advance(static_cast<std::size_t>(p - start));
     if ((f & 0xFFFF) == 0xFFFF) report(options.progress, "write", f + 1, faces);
   }
-  file.commit();
+  // Before the commit: a callback that throws (a cancel) must leave no file behind.
   report(options.progress, "write", faces, faces);
+  file.commit();
 }
 
 }  // namespace ocsimp::detail

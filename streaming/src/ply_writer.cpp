@@ -267,8 +267,9 @@ void write_ply(const std::string& path, const IndexedMesh& mesh, const WriteOpti
     writer.add_faces(mesh.triangles.data() + first, count);
     if (first + count < layout.faces) report(options.progress, "write", first + count, layout.faces);
   }
-  writer.finish();
+  // Before the commit: a callback that throws (a cancel) must leave no file behind.
   report(options.progress, "write", layout.faces, layout.faces);
+  writer.finish();
 }
 
 }  // namespace detail

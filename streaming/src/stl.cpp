@@ -434,8 +434,9 @@ void write_stl(const std::string& path, const IndexedMesh& mesh, const WriteOpti
   } else {
     write_binary(file, mesh, options);
   }
-  file.commit();
+  // Before the commit: a callback that throws (a cancel) must leave no file behind.
   report(options.progress, "write", mesh.triangles.size(), mesh.triangles.size());
+  file.commit();
 }
 
 }  // namespace ocsimp::detail

@@ -3,6 +3,7 @@
 // formats of a chain store them.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
 #include <unordered_set>
 #include <vector>
@@ -96,6 +97,25 @@ TEST(RoundTrip, EveryFormat) {
     EXPECT_EQ(detect_format(path), f.format);
     expect_equivalent(mesh, read_mesh(path), {f});
   }
+}
+
+// A progress callback that throws (a cancelled write) leaves no file, in every format: the PLY writer made
+// its last report after the rename, so the file was complete but the caller was told the write failed.
+TEST(RoundTrip, AWriteCancelledFromItsProgressLeavesNoFile) {
+  TempDir dir;
+  const IndexedMesh mesh = test::attributed_sphere(2);
+  WriteOptions options;
+  options.progress = [](std::string_view, std::uint64_t, std::uint64_t) { throw Error("cancelled"); };
+  for (const Format& f : kFormats) {
+    SCOPED_TRACE(f.extension);
+    const std::string path = dir / (std::string("cancelled.") + f.extension);
+    EXPECT_THROW(write_mesh(path, mesh, options), Error);
+    EXPECT_FALSE(std::filesystem::exists(path));
+  }
+  // A format outside the enum wrote nothing and returned as if it had.
+  WriteOptions odd;
+  odd.format = static_cast<FileFormat>(9);
+  EXPECT_THROW(write_mesh(dir / "odd.ply", mesh, odd), Error);
 }
 
 TEST(RoundTrip, EveryPairOfFormats) {
