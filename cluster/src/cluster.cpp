@@ -482,6 +482,12 @@ QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options, Clust
       !(options.carried_border_weight >= 0.0) || !std::isfinite(options.carried_border_weight)) {
     throw Error("the boundary weight must be a non-negative number");
   }
+  if (options.representative != Representative::quadric && options.representative != Representative::mean &&
+      options.representative != Representative::constrained) {
+    throw Error("unknown representative " + std::to_string(static_cast<int>(options.representative)));
+  }
+  if (!stream.vertices().origin.allFinite())
+    throw Error(stream.path(), {}, "the stream's origin is not a finite point");
   const unsigned threads = static_cast<unsigned>(
       worker_threads(static_cast<int>(std::min(options.threads, unsigned{std::numeric_limits<int>::max()}))));
   ClusterStats local;

@@ -1296,6 +1296,12 @@ TEST(Cluster, RejectsBadInputAndImpossibleOptions) {
   ClusterOptions tiny;
   tiny.cell_size = 1e-9;
   EXPECT_THROW(run(test::grid_square(4), tiny), Error);
+  ClusterOptions odd = grid_options(4);  // a value outside the enum placed like some default
+  odd.representative = static_cast<Representative>(7);
+  EXPECT_THROW(run(test::grid_square(4), odd), Error);
+  IndexedMesh lost = test::grid_square(4);
+  lost.origin.y() = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(run(lost, grid_options(4)), Error);
   for (double size : {-0.1, std::numeric_limits<double>::quiet_NaN()}) {
     ClusterOptions odd;  // fell back to the grid resolution without a word
     odd.cell_size = size;

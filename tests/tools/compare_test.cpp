@@ -217,6 +217,16 @@ TEST(DistanceIndex, RejectsMeshesItCannotMeasure) {
   IndexedMesh not_finite = test::grid_square(1);
   not_finite.positions[2].y() = std::numeric_limits<float>::quiet_NaN();
   EXPECT_THROW(DistanceIndex{not_finite}, Error);
+  IndexedMesh lost = test::grid_square(1);
+  lost.origin.z() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(DistanceIndex{lost}, Error);
+  // A NaN point was called "too far from this mesh".
+  try {
+    DistanceIndex(test::grid_square(1)).closest_point(Vec3d(std::nan(""), 0, 0));
+    FAIL() << "a NaN point was measured";
+  } catch (const Error& e) {
+    EXPECT_NE(e.reason().find("not finite"), std::string::npos) << e.what();
+  }
   // A mesh 1e30 across is measured (see TinyAndHugeMeshesMeasureLikeTheirUnitSizedCopies), but a point 1e30
   // away from a unit-sized one is too far for its float index.
   IndexedMesh huge = test::grid_square(1);

@@ -4,6 +4,7 @@
 
 #include <tbb/global_control.h>
 #include <cmath>
+#include <filesystem>
 
 #include "ocsimp/core/error.h"
 #include "ocsimp/core/mesh.h"
@@ -61,6 +62,18 @@ TEST(Generate, SameSeedSameMeshAnyThreadCount) {
   EXPECT_EQ(a.triangles, b.triangles);
   const IndexedMesh c = generate_scan_mesh(small(30'000, 12));
   EXPECT_NE(a.positions, c.positions);
+}
+
+// The streaming generator writes PLY bytes: under another name every reader took them for that format and
+// refused them.
+TEST(Generate, StreamsOnlyToAPlyName) {
+  test::TempDir dir;
+  for (const char* name : {"scan.obj", "scan.stl", "scan.drc", "scan"}) {
+    EXPECT_THROW(generate_scan_ply(dir / name, small(2'000, 1)), Error) << name;
+    EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  }
+  const GeneratedCounts written = generate_scan_ply(dir / "scan.PLY", small(2'000, 1));
+  EXPECT_EQ(written.faces, read_mesh(dir / "scan.PLY").face_count());
 }
 
 TEST(Generate, HolesOpenBordersAndKeepTheMeshClean) {

@@ -174,6 +174,7 @@ DistanceIndex::DistanceIndex(const IndexedMesh& mesh, std::string name) : impl_(
   impl.name = std::move(name);
   impl.origin = mesh.origin;
   if (mesh.triangles.empty()) throw Error(impl.name, {}, "the mesh has no triangles to measure");
+  if (!mesh.origin.allFinite()) throw Error(impl.name, {}, "the mesh's origin is not a finite point");
   const std::size_t vertex_count = mesh.positions.size();
   for (std::size_t v = 0; v < vertex_count; ++v) {
     if (!mesh.positions[v].allFinite())
@@ -398,6 +399,7 @@ ClosestPoint DistanceIndex::closest_point(const Vec3d& p, double upper_bound) co
   const double scale = impl_->embree_scale;
   const Vec3d scaled = p * scale;
   // Embree ignores points beyond about 1.8e18 (its FLT_LARGE) in its units: a mesh's size or less there.
+  if (!p.allFinite()) throw Error(impl_->name, {}, "a point to measure is not finite");
   if (!(scaled.cwiseAbs().maxCoeff() < 1e18))
     throw Error(impl_->name, {}, "a point to measure lies too far from this mesh for its float index");
   const Vec3f pf = scaled.cast<float>();

@@ -12,6 +12,7 @@
 
 #include "ocsimp/core/error.h"
 #include "ocsimp/core/system.h"
+#include "ocsimp/streaming/io.h"
 #include "ocsimp/streaming/ply_writer.h"
 
 namespace ocsimp {
@@ -394,6 +395,9 @@ GeneratedCounts generated_counts(const GenerateOptions& options) {
 }
 
 GeneratedCounts generate_scan_ply(const std::string& path, const GenerateOptions& options) {
+  // Other names got PLY bytes that every reader then took for their own format and refused.
+  if (format_from_extension(path) != FileFormat::ply)
+    throw Error(path, {}, "the generator writes PLY: name the file .ply");
   const GeneratedCounts expected = generated_counts(options);
   PlyLayout layout;
   layout.vertices = expected.vertices;

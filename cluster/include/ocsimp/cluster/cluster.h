@@ -22,6 +22,10 @@
 // count (a triangle spanning two owners has its quadric computed by both, identically). Cells, and so
 // output vertices, are numbered in Morton order of their grid coordinates, and triangles are sorted, so
 // shuffling the input's triangles changes the output only by the rounding of sums taken in another order.
+// Sums are gathered chunk by chunk within each batch the stream delivers, so a stream that cuts its batches
+// elsewhere (another ReadOptions::batch_capacity, a TriangleStream of one's own) changes that rounding too
+// (bunny: the last bits of half the quadrics), not the triangles; the readers' cuts depend on the file
+// alone.
 //
 // Memory (indexed inputs): the reader's 12 bytes a vertex, which the pass reuses in place to hold each
 // vertex's cell and its position inside the cell (see TriangleStream::scratch_vertices()) and releases once
@@ -168,8 +172,10 @@ std::uint64_t planned_fine_cells(const ClusterOptions& options);
 // Clusters the stream in one pass and returns the mesh with one quadric per vertex (the sum of the plane
 // quadrics of the original triangles that touched the cell). Consumes the stream; an indexed stream's vertex
 // array is emptied (see the top of this file). Throws Error on bad input (non-finite
-// coordinates, indices past the vertex array) and on impossible options (a cell size giving more than 2^21
-// cells along an axis, an octree without a target, more than 2^31 occupied cells).
+// coordinates or origin, indices past the vertex array) and on impossible options (a cell size giving more
+// than 2^21 cells along an axis, an octree without a target, more than 2^31 occupied cells, an unknown
+// representative). A stream's bounds() and attribute arrays are trusted as the readers make them: a point
+// outside the bounds is clamped into the border cells.
 QuadricMesh cluster(TriangleStream& stream, const ClusterOptions& options = {},
                     ClusterStats* stats = nullptr);
 

@@ -58,7 +58,7 @@ struct ClosestPoint {
 class DistanceIndex {
  public:
   // `name` labels errors (usually the file the mesh came from). Throws Error when the mesh has no triangles,
-  // a triangle refers to a vertex that does not exist, or a position is not finite.
+  // a triangle refers to a vertex that does not exist, or a position or the origin is not finite.
   explicit DistanceIndex(const IndexedMesh& mesh, std::string name = {});
   DistanceIndex(DistanceIndex&&) noexcept;
   DistanceIndex& operator=(DistanceIndex&&) noexcept;
@@ -66,7 +66,8 @@ class DistanceIndex {
 
   // The exact closest point of the surface to p, searched within `upper_bound` of p: pass the distance to any
   // point known to lie on the surface to prune the search (the answer is the same). When nothing lies within
-  // the bound, returns a ClosestPoint whose distance_squared is infinite.
+  // the bound, returns a ClosestPoint whose distance_squared is infinite. Throws Error for a point that is
+  // not finite, or so far from the mesh (about 1e18 of its sizes) that the float index cannot hold it.
   ClosestPoint closest_point(const Vec3d& p,
                              double upper_bound = std::numeric_limits<double>::infinity()) const;
 

@@ -42,7 +42,8 @@ struct GeneratedCounts {
 };
 GeneratedCounts generated_counts(const GenerateOptions& options);
 
-// Streams the mesh to a PLY file (written atomically). Returns the counts written.
+// Streams the mesh to a PLY file (written atomically). Returns the counts written. Throws Error for a path
+// not named .ply.
 GeneratedCounts generate_scan_ply(const std::string& path, const GenerateOptions& options);
 
 // The same mesh in memory, for tests and benchmarks of moderate size.
