@@ -61,19 +61,21 @@ struct Component {
 class ScanSurface {
  public:
   explicit ScanSurface(const GenerateOptions& options) : options_(options) {
-    if (options.components < 1 || options.components > 1000) throw Error("--components must be in 1..1000");
-    if (options.holes < 0 || options.holes > 6) throw Error("--holes must be in 0..6 (one per cube face)");
+    if (options.components < 1 || options.components > 1000)
+      throw Error("the component count must be in 1..1000");
+    if (options.holes < 0 || options.holes > 6)
+      throw Error("the hole count must be in 0..6 (one per cube face)");
     // Beyond 1e9 a double's spacing (1.2e-7 there) reaches the finest lattice's detail: at 1e15 a blob had 18
     // distinct x values. Georeferenced frames stay far below (UTM northings 1e7, geocentric 6.4e6).
     if (!options.offset.allFinite() || options.offset.cwiseAbs().maxCoeff() > kMostOffset)
       throw Error(
-          "--offset must be finite, each coordinate within 1e9 of zero (farther, doubles cannot hold the "
+          "the offset must be finite, each coordinate within 1e9 of zero (farther, doubles cannot hold the "
           "mesh's detail)");
-    if (!(options.noise >= 0.0) || options.noise > 10.0) throw Error("--noise must be in 0..10");
+    if (!(options.noise >= 0.0) || options.noise > 10.0) throw Error("the noise must be in 0..10");
     const double per_component = static_cast<double>(options.triangles) / options.components;
     n_ = std::max<std::uint64_t>(static_cast<std::uint64_t>(std::llround(std::sqrt(per_component / 12.0))),
                                  options.holes > 0 ? 12 : 1);
-    if (n_ > 100'000) throw Error("--triangles too large (at most 1.2e11 per component)");
+    if (n_ > 100'000) throw Error("too many triangles (at most 1.2e11 per component)");
     layer_ = (n_ + 1) * (n_ + 1);
     ring_ = 4 * n_;
     vertices_per_component_ = 6 * n_ * n_ + 2;
@@ -320,7 +322,7 @@ class ScanSurface {
       for (const Hole& h : components_[c].holes) next -= h.rows * h.run_length;
     }
     if (next > std::numeric_limits<Index>::max())
-      throw Error("--triangles too large: more than 2^32-1 vertices");
+      throw Error("too many triangles: more than 2^32-1 vertices");
   }
 
  private:

@@ -452,9 +452,13 @@ bool borders_carried(const FirstStage& stage, const ClusterOptions& cluster) {
 }
 
 void check_common(const SimplifyOptions& options) {
-  if (options.target_ratio < 0 || options.target_ratio > 1) throw Error("--ratio must be in (0, 1]");
+  // The library's own words (the command line checks its flags first); a NaN ratio passed the old test.
+  if (!(options.target_ratio >= 0 && options.target_ratio <= 1))
+    throw Error("the ratio must be in (0, 1] (or 0: none)");
   if (options.intermediate != 0 && !(options.intermediate >= 1 && std::isfinite(options.intermediate)))
-    throw Error("--intermediate must be a finite number of at least 1 (or 0: chosen from the memory limit)");
+    throw Error(
+        "the intermediate multiple must be a finite number of at least 1 (or 0: chosen from the memory "
+        "limit)");
 }
 
 // The clustering stage's error, measured as the decimator measures a collapse (DecimateStats::max_error):
