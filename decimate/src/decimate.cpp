@@ -2854,14 +2854,14 @@ struct Decimator {
     return (target_f > 0 && faces_alive <= target_f + 2) || (target_v > 0 && verts_alive <= target_v + 2);
   }
 
-  // The collapses of a round's regions, added up across threads as they go and reported by whichever
-  // thread finds no other reporting: a round of a large mesh's regions can take seconds.
   // The total a progress report gives once `done` collapses are done of `expected`: never below what is
   // done, and 0 without a count target (only max_error), where a total of what is done read as finished.
   static std::uint64_t progress_total(std::uint64_t expected, std::uint64_t done) {
     return expected == 0 ? 0 : std::max(expected, done);
   }
 
+  // The collapses of a round's regions, added up across threads as they go and reported by whichever
+  // thread finds no other reporting: a round of a large mesh's regions can take seconds.
   struct RoundProgress {
     RoundProgress(const ProgressFn& f, std::uint64_t b, std::uint64_t e) : fn(f), before(b), expected(e) {}
     const ProgressFn& fn;
