@@ -532,6 +532,74 @@ TEST(Pipeline, AClusteringThatLosesTheFacesGivesWayToDecimatingInCore) {
   }));
 }
 
+// A hemispherical cup of radius 1 with walls `wall` thick: outer and inner surfaces of n x n/2 quads, the
+// rim joining them (a closed manifold).
+IndexedMesh thick_cup(int n, float wall) {
+  IndexedMesh cup;
+  const int rings = n / 2;
+  auto shell = [&](float radius) {
+    const Index bottom = static_cast<Index>(cup.positions.size());
+    cup.positions.push_back({0, 0, -radius});
+    for (int j = 1; j <= rings; ++j) {
+      const double theta = M_PI / 2 * j / rings;
+      for (int i = 0; i < n; ++i) {
+        const double phi = 2 * M_PI * i / n;
+        cup.positions.push_back(Vec3d(radius * std::sin(theta) * std::cos(phi),
+                                      radius * std::sin(theta) * std::sin(phi), -radius * std::cos(theta))
+                                    .cast<float>());
+      }
+    }
+    return bottom;
+  };
+  const Index outer = shell(1.0f), inner = shell(1.0f - wall);
+  auto at = [&](Index base, int ring, int i) { return base + 1 + static_cast<Index>(ring * n + (i % n)); };
+  auto quad = [&](Index a, Index b, Index c, Index d) {
+    cup.triangles.push_back({a, b, c});
+    cup.triangles.push_back({a, c, d});
+  };
+  for (int i = 0; i < n; ++i) {
+    cup.triangles.push_back({outer, at(outer, 0, i + 1), at(outer, 0, i)});
+    cup.triangles.push_back({inner, at(inner, 0, i), at(inner, 0, i + 1)});
+    for (int j = 0; j + 1 < rings; ++j) {
+      quad(at(outer, j, i), at(outer, j, i + 1), at(outer, j + 1, i + 1), at(outer, j + 1, i));
+      quad(at(inner, j, i), at(inner, j + 1, i), at(inner, j + 1, i + 1), at(inner, j, i + 1));
+    }
+    quad(at(outer, rings - 1, i), at(outer, rings - 1, i + 1), at(inner, rings - 1, i + 1),
+         at(inner, rings - 1, i));
+  }
+  return cup;
+}
+
+// Clustering merges walls thinner than its cells, and the folds it leaves can block the decimator above a
+// target the input reaches: a cup of 80 k faces with walls 0.01 thick, through a 4x intermediate to 800
+// faces, stopped at 2,023. The input is then read again and decimated in core, as where clustering keeps
+// too few faces.
+TEST(Pipeline, ADecimationBlockedOnTheClusteredMeshGivesWayToDecimatingInCore) {
+  test::TempDir dir;
+  const IndexedMesh cup = thick_cup(200, 0.01f);
+  ASSERT_EQ(analyze_topology(cup).boundary_edges, 0u);
+  const std::string path = dir / "cup.ply";
+  write_mesh(path, cup);
+  SimplifyOptions options;
+  options.target_faces = 800;
+  options.two_stage = true;
+  options.intermediate = 4;
+  std::vector<std::string> warnings;
+  options.warn = [&](const std::string& w) { warnings.push_back(w); };
+  const SimplifyResult result = simplify(path, options);
+  EXPECT_EQ(result.mesh.face_count(), 800u) << result.decimate.reason;
+  EXPECT_TRUE(result.decimate.target_reached);
+  EXPECT_FALSE(result.clustered);
+  EXPECT_EQ(analyze_topology(result.mesh).non_manifold_edges, 0u);
+  EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("reading the input again to decimate it in core") != std::string::npos;
+  }));
+  // Both tries are in the phases: cluster and decimate, then read and decimate.
+  std::vector<std::string> names;
+  for (const PhaseReport& p : result.phases) names.push_back(p.name);
+  EXPECT_EQ(std::count(names.begin(), names.end(), "decimate"), 2) << names.size();
+}
+
 TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
   // Out of core the intermediate is clustered to a size, not to an error: --max-error 0 let no collapse
   // through, yet the output was the clustered intermediate, reported with a max_error of 0 and the target
