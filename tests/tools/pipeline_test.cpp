@@ -22,6 +22,15 @@
 namespace ocsimp {
 namespace {
 
+// Options that cluster first, to `intermediate` times the face target, whatever the memory.
+SimplifyOptions two_stage_to(std::uint64_t faces, double intermediate) {
+  SimplifyOptions options;
+  options.target_faces = faces;
+  options.two_stage = true;
+  options.intermediate = intermediate;
+  return options;
+}
+
 std::string write_scan(const test::TempDir& dir, std::uint64_t triangles, int holes = 0) {
   GenerateOptions options;
   options.triangles = triangles;
@@ -167,11 +176,7 @@ TEST(Pipeline, AnIntermediateBelowTheTargetIsReportedShort) {
   }
   const std::string path = dir / "pieces.ply";
   write_mesh(path, pieces);
-  SimplifyOptions options;
-  options.target_faces = 100;
-  options.two_stage = true;
-  options.intermediate = 1;
-  const SimplifyResult result = simplify(path, options);
+  const SimplifyResult result = simplify(path, two_stage_to(100, 1));
   ASSERT_TRUE(result.clustered);
   EXPECT_LE(result.mesh.face_count(), 100u);
   EXPECT_EQ(result.decimate.target_reached, result.mesh.face_count() == 100u) << result.decimate.reason;
@@ -580,10 +585,7 @@ TEST(Pipeline, ADecimationBlockedOnTheClusteredMeshGivesWayToDecimatingInCore) {
   ASSERT_EQ(analyze_topology(cup).boundary_edges, 0u);
   const std::string path = dir / "cup.ply";
   write_mesh(path, cup);
-  SimplifyOptions options;
-  options.target_faces = 800;
-  options.two_stage = true;
-  options.intermediate = 4;
+  SimplifyOptions options = two_stage_to(800, 4);
   std::vector<std::string> warnings;
   options.warn = [&](const std::string& w) { warnings.push_back(w); };
   const SimplifyResult result = simplify(path, options);
