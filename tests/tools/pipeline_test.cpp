@@ -800,6 +800,14 @@ TEST(Pipeline, RefusesMissingTargetsAndBadFiles) {
   SimplifyOptions options;
   options.target_faces = 100;
   EXPECT_THROW(simplify(dir / "missing.ply", options), Error);
+  // A NaN ratio passed the range check beside a face target; the message is the library's, not a flag's.
+  options.target_ratio = std::numeric_limits<double>::quiet_NaN();
+  try {
+    simplify(path, options);
+    ADD_FAILURE() << "a NaN ratio was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("the ratio must be in (0, 1]"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
