@@ -16,6 +16,9 @@
 // rejected pair is retried when a collapse next to it changes its neighbourhood.
 //
 // Typical use:
+//   ocsimp::ReadOptions read;
+//   read.split_corner_attributes = true;  // as `ocsimp decimate` reads: each side of a seam keeps its own
+//   ocsimp::QuadricMesh quadric_mesh{ocsimp::read_mesh(path, read), {}};
 //   ocsimp::DecimateOptions options;
 //   options.target_faces = 10000;
 //   ocsimp::DecimateResult result = ocsimp::decimate(std::move(quadric_mesh), options);
