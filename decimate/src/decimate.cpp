@@ -3158,13 +3158,21 @@ struct Decimator {
 
 }  // namespace
 
+namespace {
+
+// Throws Error unless ratio is in (0, 1], naming it in full (1.0000001 printed as 1).
+void check_ratio(double ratio) {
+  if (ratio > 0 && ratio <= 1) return;
+  char text[64];
+  std::snprintf(text, sizeof text, "%.17g", ratio);
+  throw Error(std::string("the ratio must be in (0, 1], not ") + text);
+}
+
+}  // namespace
+
 std::uint64_t ratio_target(double ratio, std::uint64_t faces) {
   // A cast of a NaN, a negative or an out-of-range product to an integer is undefined.
-  if (!(ratio > 0 && ratio <= 1)) {
-    char text[64];
-    std::snprintf(text, sizeof text, "%.17g", ratio);
-    throw Error(std::string("a ratio must be in (0, 1], not ") + text);
-  }
+  check_ratio(ratio);
   // In doubles, not through llround's signed 64 bits: a count past 2^63 came back as 2^63.
   const double target = std::round(ratio * static_cast<double>(faces));
   if (target >= static_cast<double>(faces)) return faces;
@@ -3227,11 +3235,7 @@ const char* stop_name(DecimateStop stop) {
 DecimateResult decimate(QuadricMesh input, const DecimateOptions& options) {
   // The values first, then whether they stop anything: a ratio of -0.5 or a NaN bound read as "no stopping
   // criterion".
-  if (options.target_ratio != 0 && !(options.target_ratio > 0 && options.target_ratio <= 1)) {
-    char text[64];
-    std::snprintf(text, sizeof text, "%.17g", options.target_ratio);
-    throw Error(std::string("decimate: the ratio must be in (0, 1], got ") + text);
-  }
+  if (options.target_ratio != 0) check_ratio(options.target_ratio);
   if (!(options.max_error >= 0)) throw Error("decimate: the maximum error must be a distance >= 0");
   // Finite too: an infinite border weight made every border quadric infinite, the reported error smaller
   // than the real one, and the output quadrics unusable for a next level; an infinite attribute weight times
