@@ -1946,13 +1946,12 @@ struct Decimator {
       deferred.push_back(e);
       return;
     }
-    decimate_detail::RawQuadric q{};
+    Quadric q;
     double area = 0;
     Vec3d at[4];
     for (int i = 0; i < 4; ++i) {
       const Vertex& v = verts[corners[i]];
-      q = {q.a00 + v.q.a00, q.a01 + v.q.a01, q.a02 + v.q.a02, q.a11 + v.q.a11, q.a12 + v.q.a12,
-           q.a22 + v.q.a22, q.b0 + v.q.b0,   q.b1 + v.q.b1,   q.b2 + v.q.b2,   q.c + v.q.c};
+      decimate_detail::add_to(q, v.q);
       area += v.area;
       at[i] = rel(corners[i]);
     }
@@ -1960,20 +1959,21 @@ struct Decimator {
     // x, y, z (relative to the point), the integral of |p|^2 is its area / 6 times (|x|^2 + |y|^2 + |z|^2 +
     // x.y + y.z + z.x).
     static constexpr int kFaces[4][3] = {{0, 1, 2}, {0, 1, 3}, {0, 2, 3}, {1, 2, 3}};
-    double surface = 0;
+    double face_area[4], surface = 0;
     Vec3d centroid = Vec3d::Zero();
-    for (const auto& f : kFaces) {
-      const double a = 0.5 * (at[f[1]] - at[f[0]]).cross(at[f[2]] - at[f[0]]).norm();
-      surface += a;
-      centroid += a / 3 * (at[f[0]] + at[f[1]] + at[f[2]]);
+    for (int k = 0; k < 4; ++k) {
+      const int* f = kFaces[k];
+      face_area[k] = 0.5 * (at[f[1]] - at[f[0]]).cross(at[f[2]] - at[f[0]]).norm();
+      surface += face_area[k];
+      centroid += face_area[k] / 3 * (at[f[0]] + at[f[1]] + at[f[2]]);
     }
     if (surface > 0) centroid /= surface;
     double moment = 0;
-    for (const auto& f : kFaces) {
+    for (int k = 0; k < 4; ++k) {
+      const int* f = kFaces[k];
       const Vec3d x = at[f[0]] - centroid, y = at[f[1]] - centroid, z = at[f[2]] - centroid;
-      const double a = 0.5 * (y - x).cross(z - x).norm();
-      moment +=
-          a / 6 * (x.squaredNorm() + y.squaredNorm() + z.squaredNorm() + x.dot(y) + y.dot(z) + z.dot(x));
+      moment += face_area[k] / 6 *
+                (x.squaredNorm() + y.squaredNorm() + z.squaredNorm() + x.dot(y) + y.dot(z) + z.dot(x));
     }
     const double mean_square = surface > 0 ? moment / surface : 0.0;
     const double weight = area * area_unit;
@@ -1983,11 +1983,8 @@ struct Decimator {
       heap.remove(e, kIdleError);
       return;
     }
-    const float key = key_of(cost, trace(q));
-    if (key > queued) {
-      heap.update(e, key);
-      if (heap.top().edge != e) return;
-    }
+    const float key = key_of(cost, q.trace());
+    if (sent_back(e, key, &queued)) return;
     for (const std::vector<Index>* list : {&fa, &fb}) {
       for (Index f : *list) {
         Face& t = faces[f];
@@ -2152,6 +2149,15 @@ struct Decimator {
     return refused;
   }
 
+  // Raises the top pair e's key to `key` where that is above `*queued` (its key in the queue, updated):
+  // returns whether another pair is then at the top, which goes first.
+  bool sent_back(Index e, float key, float* queued) {
+    if (!(key > *queued)) return false;
+    heap.update(e, key);
+    *queued = key;
+    return heap.top().edge != e;
+  }
+
   void try_top(std::uint64_t short_allowed) {
     const HeapEntry top = heap.top();
     const Index e = top.edge;
@@ -2186,10 +2192,7 @@ struct Decimator {
         const float floor_key = key_of(kTieFloor * kTieFloor * w * w, w);
         penalized = std::min(penalized, key + kNearTie * std::max(applied_key, floor_key));
       }
-      if (!(penalized > queued)) return false;
-      heap.update(e, penalized);
-      queued = penalized;
-      return heap.top().edge != e;
+      return sent_back(e, penalized, &queued);
     };
     const bool large_fan = std::max(verts[a].live_faces, verts[b].live_faces) > kLargeFan;
     if (large_fan) {
@@ -2252,11 +2255,7 @@ struct Decimator {
       }
       cost = pl.error + attribute_cost;
       const float fallback_key = key_of(cost, trace(q));
-      if (fallback_key > queued) {
-        heap.update(e, fallback_key);
-        queued = fallback_key;
-        if (heap.top().edge != e) return;
-      }
+      if (sent_back(e, fallback_key, &queued)) return;
       key = std::max(key, fallback_key);
     }
     // A sliver counts against a collapse only where it is worse than the faces were before: CAD tessellations
