@@ -191,11 +191,21 @@ struct FirstStage {
   std::vector<PhaseReport> phases;
   ClusterStats cluster;
   std::uint64_t memory_limit = 0;
+  // Once clustered: what reading the input whole and decimating it in core is expected to take.
+  double whole_peak = 0;
   // The decimator's targets: in core the ratio is left to the decimator, which applies it to the exact face
   // count it sees; after clustering it is resolved against the input's count here.
   std::uint64_t target_faces = 0;
   double target_ratio = 0;
 };
+
+// What a run that gives up on clustering says it does next, at `whole_peak` bytes against `limit`.
+std::string reread_note(double whole_peak, std::uint64_t limit) {
+  return "reading the input again to decimate it in core, which is expected to take about " +
+         format_bytes(static_cast<std::uint64_t>(whole_peak)) +
+         (whole_peak > static_cast<double>(limit) ? ", over the memory limit of " + format_bytes(limit)
+                                                  : std::string());
+}
 
 // `whole`: read the whole input for the decimator, whatever the limit (see simplify's second try).
 FirstStage first_stage(const std::string& input_path, const SimplifyOptions& options, bool whole = false) {
@@ -412,6 +422,7 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
   const std::uint64_t final_target = count_target(options, stage.cluster.input_triangles);
   const double whole_peak =
       process_bytes + vertex_bytes + kInCoreBytesPerFace * static_cast<double>(stage.cluster.input_triangles);
+  stage.whole_peak = whole_peak;
   // With an error bound alone there is no count to fall short of, but a clustering that kept no face at all
   // still gave an empty output.
   const bool short_of_count = !stage.cluster.target_met && final_target > 0 &&
@@ -424,10 +435,8 @@ FirstStage first_stage(const std::string& input_path, const SimplifyOptions& opt
       options.warn(
           "clustering kept " + std::to_string(clustered_faces) + " faces" +
           (lost_everything ? std::string() : ", under the target of " + std::to_string(final_target)) +
-          " (a face whose corners share a cell collapses, and thin or small parts lose all theirs): "
-          "reading the input again to decimate it in core, which is expected to take about " +
-          format_bytes(static_cast<std::uint64_t>(whole_peak)) +
-          (over ? ", over the memory limit of " + format_bytes(stage.memory_limit) : std::string()));
+          " (a face whose corners share a cell collapses, and thin or small parts lose all theirs): " +
+          reread_note(whole_peak, stage.memory_limit));
     }
     stage.mesh = {};
     stage.cluster = {};
@@ -580,19 +589,15 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   // faces of 4,158 vertices, non-manifold everywhere, where decimating in core gets there at a tenth of
   // the Hausdorff distance. The target comes first, as where the clustering kept too few faces: the input
   // is read again, whole, and decimated in core, over the limit, when the process can have that memory.
-  const double whole_peak = kProcessBytes + kInCoreBytesPerFace * static_cast<double>(stage.input_faces);
   // (Only above the target: a clustering that left fewer faces than it is reported by
   // check_intermediate_reached.)
   if (stage.clustered && decimated.stats.stop == DecimateStop::blocked && stage.target_faces > 0 &&
-      decimated.stats.faces > stage.target_faces && whole_peak <= static_cast<double>(memory_room())) {
+      decimated.stats.faces > stage.target_faces && stage.whole_peak <= static_cast<double>(memory_room())) {
     if (options.warn) {
-      const bool over = whole_peak > static_cast<double>(stage.memory_limit);
       options.warn("decimating the clustered mesh stopped at " + std::to_string(decimated.stats.faces) +
                    " faces, above the target of " + std::to_string(stage.target_faces) +
-                   " (clustering merges walls thinner than its cells, and the folds left block collapses): "
-                   "reading the input again to decimate it in core, which is expected to take about " +
-                   format_bytes(static_cast<std::uint64_t>(whole_peak)) +
-                   (over ? ", over the memory limit of " + format_bytes(stage.memory_limit) : std::string()));
+                   " (clustering merges walls thinner than its cells, and the folds left block collapses): " +
+                   reread_note(stage.whole_peak, stage.memory_limit));
     }
     std::vector<PhaseReport> first_try = std::move(result.phases);
     first_try.push_back(
