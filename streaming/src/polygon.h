@@ -20,9 +20,9 @@
 namespace ocsimp::detail {
 
 // Above this many corners a concave polygon keeps its fan: ear clipping tests each candidate ear against the
-// reflex corners in its box, found through their Morton codes, which keeps a star or a comb of 64 k corners
-// under 0.1 s, but an outline whose ears' boxes all span most of the codes is still quadratic (about 5 s at
-// this size). The readers say how many they fanned so (concave_fans_note): a comb of 4,098 corners covered
+// reflex corners in its box, found through their Morton codes: a comb of 64 k corners reads in 0.4 s and a
+// star in 1.0 s (4.6 and 4.8 s testing every reflex corner), but an outline whose ears' boxes all span most
+// of the codes is still quadratic (about 5 s at this size). The readers say how many they fanned so (concave_fans_note): a comb of 4,098 corners covered
 // 850 times its area, and decimating the fan of a 16 k-corner star took 4 minutes.
 inline constexpr std::size_t kMaxClippedCorners = 65536;
 
