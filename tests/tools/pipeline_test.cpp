@@ -602,6 +602,52 @@ TEST(Pipeline, ADecimationBlockedOnTheClusteredMeshGivesWayToDecimatingInCore) {
   EXPECT_EQ(std::count(names.begin(), names.end(), "decimate"), 2) << names.size();
 }
 
+// lod gives way the same: its first level had stopped at 2,023 faces for 800, and every level after it
+// started from there.
+TEST(Lod, ALevelBlockedOnTheClusteredMeshGivesWayToDecimatingInCore) {
+  test::TempDir dir;
+  const std::string path = dir / "cup.ply";
+  write_mesh(path, thick_cup(200, 0.01f));
+  LodOptions options;
+  options.level_faces = {800, 400};
+  options.two_stage = true;
+  options.intermediate = 4;
+  std::vector<std::string> warnings;
+  options.warn = [&](const std::string& w) { warnings.push_back(w); };
+  const LodResult result = lod(path, options);
+  ASSERT_EQ(result.levels.size(), 2u);
+  double previous = 0;
+  for (const LodLevel& level : result.levels) {
+    EXPECT_EQ(level.mesh.face_count(), level.target_faces) << level.decimate.reason;
+    EXPECT_TRUE(level.decimate.target_reached);
+    EXPECT_EQ(analyze_topology(level.mesh).non_manifold_edges, 0u);
+    EXPECT_GE(level.max_error, previous);
+    previous = level.max_error;
+  }
+  EXPECT_FALSE(result.clustered);
+  EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("reading the input again to decimate it in core") != std::string::npos;
+  }));
+  // The first try is in the phases, before the read that replaced it.
+  ASSERT_GE(result.phases.size(), 4u);
+  EXPECT_EQ(result.phases[1].name, "cluster");
+  EXPECT_EQ(result.phases[2].name, "level 800");
+  EXPECT_EQ(result.phases.back().name, "level 400");
+
+  // A later level that stops gives way alone: 8,000 faces come from the clustered mesh, then 800 had
+  // stopped at 1,483.
+  options.level_faces = {8000, 800};
+  const LodResult later = lod(path, options);
+  ASSERT_EQ(later.levels.size(), 2u);
+  EXPECT_TRUE(later.clustered);
+  EXPECT_TRUE(later.levels[0].decimate.target_reached);
+  EXPECT_EQ(later.levels[1].mesh.face_count(), 800u) << later.levels[1].decimate.reason;
+  EXPECT_EQ(analyze_topology(later.levels[1].mesh).non_manifold_edges, 0u);
+  EXPECT_GE(later.levels[1].max_error, later.levels[0].max_error);
+  EXPECT_EQ(later.phases.back().name, "level 800");
+  EXPECT_EQ(later.phases.back().triangles_in, 80'000u);
+}
+
 TEST(Pipeline, MaxErrorCountsTheClusteringStage) {
   // Out of core the intermediate is clustered to a size, not to an error: --max-error 0 let no collapse
   // through, yet the output was the clustered intermediate, reported with a max_error of 0 and the target

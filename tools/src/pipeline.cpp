@@ -527,6 +527,27 @@ void check_intermediate_reached(const FirstStage& stage, std::uint64_t target, s
   }
 }
 
+// A clustered mesh's merged walls and folds can block the decimator above a target the input reaches: a
+// cup of 980 k faces with walls 0.01 thick (3 across), to 10,000 faces under 120M, stopped at 15,579 faces
+// of 4,158 vertices, non-manifold everywhere, where decimating in core gets there at a tenth of the
+// Hausdorff distance. The target comes first, as where the clustering kept too few faces: the input is to
+// be read again, whole, and decimated in core, over the limit, when the process can have that memory.
+// (Only above the target: a clustering that left fewer faces than it is reported by
+// check_intermediate_reached.) Says so through `warn` when it is.
+bool gives_way_to_in_core(const FirstStage& stage, const DecimateStats& stats, std::uint64_t target,
+                          const WarningFn& warn) {
+  if (!stage.clustered || stats.stop != DecimateStop::blocked || target == 0 || stats.faces <= target ||
+      stage.whole_peak > static_cast<double>(memory_room()))
+    return false;
+  if (warn) {
+    warn("decimating the clustered mesh stopped at " + std::to_string(stats.faces) +
+         " faces, above the target of " + std::to_string(target) +
+         " (clustering merges walls thinner than its cells, and the folds left block collapses): " +
+         reread_note(stage.whole_peak, stage.memory_limit));
+  }
+  return true;
+}
+
 }  // namespace
 
 // Called for inputs only: a clustered intermediate is indexed whatever the input was, and has no repeated or
@@ -584,21 +605,7 @@ SimplifyResult simplify(const std::string& input_path, const SimplifyOptions& op
   std::uint64_t decimate_in = stage.mesh.mesh.face_count();
   DecimateResult decimated = decimate(std::move(stage.mesh), decimate_options);
   check_intermediate_reached(stage, stage.target_faces, decimate_in, decimated.stats);
-  // A clustered mesh's merged walls and folds can block the decimator above a target the input reaches: a
-  // cup of 980 k faces with walls 0.01 thick (3 across), to 10,000 faces under 120M, stopped at 15,579
-  // faces of 4,158 vertices, non-manifold everywhere, where decimating in core gets there at a tenth of
-  // the Hausdorff distance. The target comes first, as where the clustering kept too few faces: the input
-  // is read again, whole, and decimated in core, over the limit, when the process can have that memory.
-  // (Only above the target: a clustering that left fewer faces than it is reported by
-  // check_intermediate_reached.)
-  if (stage.clustered && decimated.stats.stop == DecimateStop::blocked && stage.target_faces > 0 &&
-      decimated.stats.faces > stage.target_faces && stage.whole_peak <= static_cast<double>(memory_room())) {
-    if (options.warn) {
-      options.warn("decimating the clustered mesh stopped at " + std::to_string(decimated.stats.faces) +
-                   " faces, above the target of " + std::to_string(stage.target_faces) +
-                   " (clustering merges walls thinner than its cells, and the folds left block collapses): " +
-                   reread_note(stage.whole_peak, stage.memory_limit));
-    }
+  if (gives_way_to_in_core(stage, decimated.stats, stage.target_faces, options.warn)) {
     std::vector<PhaseReport> first_try = std::move(result.phases);
     first_try.push_back(
         {"decimate", seconds_since(start), decimate_in, decimated.stats.faces, peak_rss_bytes()});
@@ -708,7 +715,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
   QuadricMesh input = std::move(stage.mesh);
   double max_error = result.cluster_error;
   for (std::size_t i = 0; i < levels.size(); ++i) {
-    const auto start = Clock::now();
+    auto start = Clock::now();
     DecimateOptions decimate_options = options.decimate;
     decimate_options.target_faces = levels[i];
     decimate_options.target_vertices = 0;
@@ -721,10 +728,36 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     decimate_options.output_quadrics = i + 1 < levels.size();
     // Levels after the first take quadrics that already hold the border planes of the level before.
     if (i > 0 || borders_carried(stage, options.cluster)) decimate_options.boundary_weight = 0;
-    const std::uint64_t faces_in = input.mesh.face_count();
+    std::uint64_t faces_in = input.mesh.face_count();
     DecimateResult decimated = decimate(std::move(input), decimate_options);
     check_intermediate_reached(stage, levels[i], faces_in, decimated.stats);
-    if (i == 0) check_input_faces(input_path, options.warn, options.decimate.weld, decimated.stats);
+    const std::string name = "level " + std::to_string(levels[i]);
+    // As in simplify, and from the level that stopped on: the levels before it are made, and those after
+    // it start from it.
+    const bool gave_way = gives_way_to_in_core(stage, decimated.stats, levels[i], options.warn);
+    if (gave_way) {
+      result.phases.push_back(
+          {name, seconds_since(start), faces_in, decimated.stats.faces, peak_rss_bytes()});
+      decimated = {};
+      std::vector<PhaseReport> before = std::move(result.phases);
+      stage = first_stage(input_path, first, true);
+      if (i == 0) {
+        // Nothing out of the clustering stage remains in the chain.
+        report_first_stage(stage, result);
+        max_error = result.cluster_error;
+      } else {
+        result.memory_needed = std::max(result.memory_needed, stage.memory_needed);
+        before.insert(before.end(), stage.phases.begin(), stage.phases.end());
+        stage.phases.clear();
+      }
+      result.phases.insert(result.phases.begin(), before.begin(), before.end());
+      decimate_options.boundary_weight = options.decimate.boundary_weight;
+      start = Clock::now();
+      faces_in = stage.mesh.mesh.face_count();
+      decimated = decimate(std::move(stage.mesh), decimate_options);
+    }
+    if (i == 0 || gave_way)
+      check_input_faces(input_path, options.warn, options.decimate.weld, decimated.stats);
 
     LodLevel level;
     level.target_faces = levels[i];
@@ -742,8 +775,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
     input.quadrics = std::move(decimated.quadrics);
     input.areas = std::move(decimated.areas);
     level.seconds = seconds_since(start);
-    result.phases.push_back(
-        {"level " + std::to_string(levels[i]), level.seconds, faces_in, level.faces, peak_rss_bytes()});
+    result.phases.push_back({name, level.seconds, faces_in, level.faces, peak_rss_bytes()});
     result.levels.push_back(std::move(level));
   }
   return result;

@@ -177,7 +177,11 @@ struct LodResult {
 };
 
 // One read of the input (in core or clustered, as simplify() decides for the largest level), then each level
-// decimated from the previous one with its quadrics carried. Throws Error on bad input or options.
+// decimated from the previous one with its quadrics carried. As in simplify(), a level whose decimation the
+// clustered mesh's folds block above its target is made again from the input read whole and decimated in
+// core (with a warning, when the machine has the memory); the levels after it start from that one, and
+// `clustered` stays true when a level before it came from the clustering. Throws Error on bad input or
+// options.
 LodResult lod(const std::string& input_path, const LodOptions& options);
 
 // `pattern` with "{faces}" replaced by `faces`. Throws Error when it has no "{faces}" and `several` is true.
