@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -116,14 +117,22 @@ std::uint64_t current_rss_bytes() {
 }
 
 std::uint64_t parse_byte_size(std::string_view text) {
-  std::string s(text);
-  std::size_t used = 0;
-  double value = 0;
-  try {
-    value = std::stod(s, &used);
-  } catch (const std::exception&) {
-    throw Error("not a size: '" + s + "' (expected e.g. 2G, 512M, 100000)");
+  const std::string s(text);
+  auto refuse = [&s](const std::string& why) {
+    throw Error("not a size: '" + s + "' (" + why + "; expected e.g. 2G, 512M, 1.5GiB, 100000)");
+  };
+  // Plain decimal digits only: strtod also took "0x10", "1e3", " 2G" and "inf", and read them by the locale.
+  auto is_digit = [&s](std::size_t i) {
+    return i < s.size() && std::isdigit(static_cast<unsigned char>(s[i]));
+  };
+  std::size_t used = 0, digits = 0;
+  for (; is_digit(used); ++used) ++digits;
+  if (used < s.size() && s[used] == '.') {
+    for (++used; is_digit(used); ++used) ++digits;
   }
+  if (digits == 0) refuse("no number");
+  double value = 0;
+  std::from_chars(s.data(), s.data() + used, value);
   std::string unit;
   for (std::size_t i = used; i < s.size(); ++i)
     unit += static_cast<char>(std::toupper(static_cast<unsigned char>(s[i])));
@@ -142,9 +151,10 @@ std::uint64_t parse_byte_size(std::string_view text) {
     scale = 1024.0 * 1024 * 1024 * 1024 * 1024;
   else if (unit == "E" || unit == "EB" || unit == "EIB")
     scale = 1024.0 * 1024 * 1024 * 1024 * 1024 * 1024;
-  if (scale == 0 || !(value >= 0) || !std::isfinite(value) || value * scale > 1.8e19) {
-    throw Error("not a size: '" + s + "' (expected e.g. 2G, 512M, 100000)");
-  }
+  if (scale == 0) refuse("an unknown unit '" + s.substr(used) + "'");
+  // "1.5" bytes was taken as 1; a fraction of a larger unit is rounded down to the byte.
+  if (scale == 1 && value != std::floor(value)) refuse("a fraction of a byte");
+  if (value * scale > 1.8e19) refuse("past 64 bits");
   return static_cast<std::uint64_t>(value * scale);
 }
 

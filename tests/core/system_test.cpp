@@ -21,6 +21,11 @@ TEST(System, ParsesByteSizes) {
   EXPECT_THROW(parse_byte_size("lots"), Error);
   EXPECT_THROW(parse_byte_size("2X"), Error);
   EXPECT_THROW(parse_byte_size("-1G"), Error);
+  EXPECT_EQ(parse_byte_size(".5K"), 512u);
+  EXPECT_EQ(parse_byte_size("0.3K"), 307u);  // a fraction of a unit rounds down to the byte
+  // Only plain decimals: these were read as 16, 1000, 1 and 2 GiB.
+  for (const char* odd : {"0x10", "1e3", "1.5", " 2G", "2 G", "inf", "nan", "", ".", "+1G", "1..5G"})
+    EXPECT_THROW(parse_byte_size(odd), Error) << odd;
 }
 
 TEST(System, ReportsMemory) {

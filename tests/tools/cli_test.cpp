@@ -108,7 +108,8 @@ TEST(Cli, BadNumbersSayWhatTheFlagTakes) {
        "--threads: '-1' is not a whole number from 0 to 4096"},
       // A budget of nothing was taken as the default (a third of RAM).
       {"simplify in.ply -o out.ply --faces 10 --memory-limit 0", "--memory-limit: '0' is less than a byte"},
-      {"lod in.ply -o out.ply --faces 10 --memory-limit 0.5", "--memory-limit: '0.5' is less than a byte"},
+      {"lod in.ply -o out.ply --faces 10 --memory-limit 0.5",
+       "--memory-limit: not a size: '0.5' (a fraction of a byte"},
       // Hexadecimal, which strtod reads (16 and 1/8 here), as the integer flags and the readers refuse it.
       {"cluster in.ply -o out.ply --cell-size 0x10", "--cell-size: '0x10' is not a finite number > 0"},
       {"decimate in.ply -o out.ply --ratio 0x1p-3", "--ratio: '0x1p-3' is not a number in (0, 1]"},

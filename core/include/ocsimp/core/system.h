@@ -29,7 +29,9 @@ int worker_threads(int requested);
 std::uint64_t peak_rss_bytes();
 std::uint64_t current_rss_bytes();
 
-// "2G", "512M", "1.5GiB", "100000" (bytes) -> bytes. Throws Error on anything else.
+// "2G", "512M", "1.5GiB", "100000" (bytes) -> bytes: a plain decimal number (no sign, exponent, hex or
+// spaces), then optionally K, M, G, T, P or E (powers of 1024, with or without "B" or "iB", any case). A
+// fraction of a unit rounds down to the byte; a byte count must be whole. Throws Error on anything else.
 std::uint64_t parse_byte_size(std::string_view text);
 std::string format_bytes(std::uint64_t bytes);
 
