@@ -775,6 +775,17 @@ TEST(Cli, ClusterWarnsWhenUnusedVerticesStretchTheGrid) {
     EXPECT_EQ(u.exit_code, 0) << u.err;
     EXPECT_TRUE(u.err.empty()) << u.err;
   }
+  // So far out that the finest grid there is holds the whole sphere in one cell: the warning blamed the
+  // input's lack of extent.
+  far.positions.back() = Vec3f(1e8f, 0, 0);
+  write_mesh(stretched, far);
+  const CommandResult f = run("cluster -q --faces 400 " + stretched + " -o " + result, dir);
+  EXPECT_EQ(f.exit_code, 0) << f.err;
+  EXPECT_NE(f.err.find("the finest grid has 1 cell, and the faces span only 1 of its 2097152 along the box: "
+                       "vertices no face uses stretch the bounding box, and no grid is finer"),
+            std::string::npos)
+      << f.err;
+  EXPECT_EQ(f.err.find("no extent"), std::string::npos) << f.err;
 }
 
 TEST(Cli, FailedConvertLeavesNothingBehind) {

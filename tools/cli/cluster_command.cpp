@@ -114,6 +114,7 @@ void add_cluster_command(CLI::App& app) {
     // collapsed".
     if (stats.input_triangles == 0) throw Error(flags->input, {}, "the mesh has no faces");
     const std::uint64_t input_bytes = stream->bytes_total();
+    const Box3 box = stream->bounds();
     stream.reset();    // its vertex array is scratch now; free it before writing
     HeldCommits held;  // the mesh appears once the report and summary are out (see publish)
     const auto write_start = std::chrono::steady_clock::now();
@@ -176,7 +177,8 @@ void add_cluster_command(CLI::App& app) {
     // word, and a far one keeps even the finest grid (2^21 cells along the box) from a target. Compared with
     // the grid the pass used, not the one asked for: a box of one point is a single cell whatever the --grid,
     // and no vertex stretches it; parts far apart span the box, and get no such hint either.
-    const bool stretched = 2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid;
+    const bool one_point = !box.empty() && box.lo == box.hi;
+    const bool stretched = !one_point && 2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid;
     const std::string stretch = std::string("vertices no face uses stretch the bounding box") +
                                 (options.octree ? "" : "; --cell-size sets the cells' size directly");
     if (stretched && options.grid > 0 && !(options.cell_size > 0) && !options.octree &&
@@ -197,7 +199,7 @@ void add_cluster_command(CLI::App& app) {
                    " cells, " + size +
                    " wide, keep few of the faces (a face whose corners share a cell collapses, and parts "
                    "thinner than a cell lose all theirs); --cell-size or --grid sets smaller cells");
-    } else if (!stats.target_met && stats.fine_cells <= 1) {
+    } else if (!stats.target_met && stats.fine_cells <= 1 && !stretched) {
       // Not a stretched box: a box of one point spans one cell of every grid.
       console.warn(std::string("the ") + (flags->vertices ? "vertex" : "face") +
                    " target was not reached: every vertex lies in one cell of the finest grid (the input has "
@@ -205,10 +207,16 @@ void add_cluster_command(CLI::App& app) {
     } else if (!stats.target_met) {
       std::string note = std::string("the ") + (flags->vertices ? "vertex" : "face") +
                          " target was not reached (the finest grid has " + std::to_string(stats.fine_cells) +
-                         " cells";
+                         (stats.fine_cells == 1 ? " cell" : " cells");
       if (stretched) {
         note += ", and the faces span only " + std::to_string(stats.spanned_cells) + " of its " +
-                std::to_string(stats.fine_grid) + " along the box: " + stretch;
+                std::to_string(stats.fine_grid) + " along the box: ";
+        // The finest grid there is (ClusterOptions::grid's limit of 2^21 cells along the box): a UTM-placed
+        // scan with one unused vertex at the origin kept a single cell, and no --cell-size is finer.
+        note += stats.fine_grid >= (1u << 21)
+                    ? "vertices no face uses stretch the bounding box, and no grid is finer; simplify "
+                      "decimates such an input in core"
+                    : stretch;
       }
       console.warn(note + ")");
     }
