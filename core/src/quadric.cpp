@@ -65,9 +65,12 @@ QuadricMinimum minimize(const Quadric& q, const Vec3d& origin, double relative_t
   const double largest = std::max(std::abs(values(0)), std::max(std::abs(values(1)), std::abs(values(2))));
   QuadricMinimum result{origin, 0};
   if (!(largest > 0.0) || !std::isfinite(largest)) return result;
+  // Never below 0: a negative tolerance took in the small negative eigenvalues rounding gives a flat
+  // quadric, and divided by them.
+  const double tolerance = relative_tolerance > 0 ? relative_tolerance : 0.0;
   Vec3d offset = Vec3d::Zero();
   for (int i = 0; i < 3; ++i) {
-    if (values(i) > relative_tolerance * largest) {
+    if (values(i) > tolerance * largest) {
       const Vec3d v = vectors.col(i);
       offset -= v * (v.dot(g) / values(i));
       ++result.rank;

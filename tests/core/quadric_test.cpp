@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 namespace ocsimp {
 namespace {
 
@@ -47,6 +49,19 @@ TEST(Quadric, NearlyParallelPlanesDoNotShootAway) {
   q += Quadric::plane(Vec3d(1e-6, 0, 1).normalized(), 0.0, 1.0);
   const QuadricMinimum m = minimize(q, {0.5, 0.5, 0.1});
   EXPECT_LT((m.point - Vec3d(0.5, 0.5, 0.0)).norm(), 1e-5);
+}
+
+TEST(Quadric, ToleranceBelowZeroCountsAsZero) {
+  // A negative tolerance took in the eigenvalues at or below zero that rounding gives a flat quadric, and
+  // divided by them.
+  Quadric q = Quadric::plane(Vec3d(1, 1, 0).normalized(), 0.0, 2.0);
+  for (double tolerance : {-1.0, std::nan("")}) {
+    const QuadricMinimum m = minimize(q, {3, 1, 7}, tolerance);
+    const QuadricMinimum zero = minimize(q, {3, 1, 7}, 0.0);
+    EXPECT_EQ(m.rank, zero.rank) << tolerance;
+    EXPECT_EQ(m.point, zero.point) << tolerance;
+    EXPECT_TRUE(m.point.allFinite()) << tolerance;
+  }
 }
 
 TEST(Quadric, ZeroQuadricReturnsOrigin) {

@@ -57,7 +57,8 @@ struct QuadricMinimum {
 // Minimizes q with a truncated eigen-decomposition of A around `origin` (Lindstrom 2000): directions whose
 // eigenvalue is below `relative_tolerance` times the largest are left at the origin, so a flat or cylindrical
 // region gets the point nearest the origin instead of an unstable one. Pass the cluster mean or edge
-// midpoint.
+// midpoint. A tolerance of 0 (or below, or NaN, which count as 0) keeps every direction whose eigenvalue is
+// positive: the exact solve where A is invertible, unstable where it nearly is not.
 QuadricMinimum minimize(const Quadric& q, const Vec3d& origin, double relative_tolerance = 1e-3);
 
 }  // namespace ocsimp
