@@ -132,7 +132,8 @@ std::uint64_t parse_byte_size(std::string_view text) {
   }
   if (digits == 0) refuse("no number");
   double value = 0;
-  std::from_chars(s.data(), s.data() + used, value);
+  // Out of range only past the doubles (hundreds of digits), where it left `value` at 0.
+  if (std::from_chars(s.data(), s.data() + used, value).ec != std::errc()) refuse("past 64 bits");
   std::string unit;
   for (std::size_t i = used; i < s.size(); ++i)
     unit += static_cast<char>(std::toupper(static_cast<unsigned char>(s[i])));

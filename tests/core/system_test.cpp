@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <string>
+
 #include "ocsimp/core/error.h"
 
 namespace ocsimp {
@@ -24,6 +26,7 @@ TEST(System, ParsesByteSizes) {
   EXPECT_EQ(parse_byte_size(".5K"), 512u);
   EXPECT_EQ(parse_byte_size("0.3K"), 307u);  // a fraction of a unit rounds down to the byte
   // Only plain decimals: these were read as 16, 1000, 1 and 2 GiB.
+  EXPECT_THROW(parse_byte_size(std::string(400, '9')), Error);  // past the doubles: it was read as 0
   for (const char* odd : {"0x10", "1e3", "1.5", " 2G", "2 G", "inf", "nan", "", ".", "+1G", "1..5G"})
     EXPECT_THROW(parse_byte_size(odd), Error) << odd;
 }
