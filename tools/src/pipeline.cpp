@@ -739,7 +739,7 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
       result.phases.push_back(
           {name, seconds_since(start), faces_in, decimated.stats.faces, peak_rss_bytes()});
       decimated = {};
-      std::vector<PhaseReport> before = std::move(result.phases);
+      std::vector<PhaseReport> phases = std::move(result.phases);
       stage = first_stage(input_path, first, true);
       if (i == 0) {
         // Nothing out of the clustering stage remains in the chain.
@@ -747,10 +747,11 @@ LodResult lod(const std::string& input_path, const LodOptions& options) {
         max_error = result.cluster_error;
       } else {
         result.memory_needed = std::max(result.memory_needed, stage.memory_needed);
-        before.insert(before.end(), stage.phases.begin(), stage.phases.end());
-        stage.phases.clear();
+        result.phases = std::move(stage.phases);
       }
-      result.phases.insert(result.phases.begin(), before.begin(), before.end());
+      // The new read's phases after those of the first try.
+      phases.insert(phases.end(), result.phases.begin(), result.phases.end());
+      result.phases = std::move(phases);
       decimate_options.boundary_weight = options.decimate.boundary_weight;
       start = Clock::now();
       faces_in = stage.mesh.mesh.face_count();
