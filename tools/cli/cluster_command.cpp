@@ -179,8 +179,13 @@ void add_cluster_command(CLI::App& app) {
     // and no vertex stretches it; parts far apart span the box, and get no such hint either.
     const bool one_point = !box.empty() && box.lo == box.hi;
     const bool stretched = !one_point && 2 * std::uint64_t{stats.spanned_cells} < stats.fine_grid;
+    // On the finest grid there is (ClusterOptions::grid's limit of 2^21 cells along the box) no --cell-size
+    // helps: a UTM-placed scan with one unused vertex at the origin kept a single cell.
+    const bool finest = stats.fine_grid >= (1u << 21);
     const std::string stretch = std::string("vertices no face uses stretch the bounding box") +
-                                (options.octree ? "" : "; --cell-size sets the cells' size directly");
+                                (finest ? ", and no grid is finer; simplify decimates such an input in core"
+                                 : options.octree ? ""
+                                                  : "; --cell-size sets the cells' size directly");
     if (stretched && options.grid > 0 && !(options.cell_size > 0) && !options.octree &&
         options.target_faces == 0) {
       console.warn("the faces span only " + std::to_string(stats.spanned_cells) + " of the " +
@@ -210,13 +215,7 @@ void add_cluster_command(CLI::App& app) {
                          (stats.fine_cells == 1 ? " cell" : " cells");
       if (stretched) {
         note += ", and the faces span only " + std::to_string(stats.spanned_cells) + " of its " +
-                std::to_string(stats.fine_grid) + " along the box: ";
-        // The finest grid there is (ClusterOptions::grid's limit of 2^21 cells along the box): a UTM-placed
-        // scan with one unused vertex at the origin kept a single cell, and no --cell-size is finer.
-        note += stats.fine_grid >= (1u << 21)
-                    ? "vertices no face uses stretch the bounding box, and no grid is finer; simplify "
-                      "decimates such an input in core"
-                    : stretch;
+                std::to_string(stats.fine_grid) + " along the box: " + stretch;
       }
       console.warn(note + ")");
     }
